@@ -1,0 +1,33 @@
+"""gearjax: non-linear, time-varying dynamics of compound planetary gear trains in JAX."""
+
+from . import _config  # noqa: F401  (float64 on import)
+from ._assembly import assemble as assemble
+from ._errors import GeometryWarning as GeometryWarning, TrainError as TrainError
+from ._kinematics import Kinematics as Kinematics, kinematics as kinematics
+from ._mesh import (
+    backlash as backlash,
+    fourier_series as fourier_series,
+    mesh_force as mesh_force,
+    phasing_report as phasing_report,
+    stiffness_amplitudes as stiffness_amplitudes,
+)
+from ._modal import ModalResult as ModalResult, generalized_eigvals as generalized_eigvals, modes as modes
+from ._static import StaticLoads as StaticLoads, static_deflection as static_deflection, static_loads as static_loads
+from ._system import System as System, system_from_matrices as system_from_matrices
+from ._toml_io import (
+    bundled_example_path as bundled_example_path,
+    dumps_train as dumps_train,
+    load_train as load_train,
+    loads_train as loads_train,
+    save_train as save_train,
+)
+from ._train import (
+    Coupling as Coupling,
+    Gear as Gear,
+    Housing as Housing,
+    Stage as Stage,
+    Train as Train,
+)
+from ._validate import geometry_warnings as geometry_warnings, validate_train as validate_train
+
+__version__ = "0.1.0"

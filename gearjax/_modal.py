@@ -1,0 +1,146 @@
+"""Modal analysis of the linear, undamped, mean-stiffness model without backlash.
+
+Modes solve ``(K + W^T diag(kbar) W) v = lambda M v``. Each is classified by where
+its strain energy sits (model.md): more than half in ``penalty`` springs (braked
+housing springs, couplings at least that stiff) -> ``penalty``; more than half in
+``rigid`` springs (free housing springs) -> ``rigid`` (near-rigid-body); otherwise
+``elastic``. A mode in which no central member moves and only the planets of one
+stage do is a ``planet`` mode of that stage; every other mode is ``overall``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._system import System
+
+REPEATED_RTOL = 1e-6
+"""Modes whose frequencies differ by less than this fraction (1 ppm) are one repeated mode."""
+
+STILL_ATOL = 1e-6
+"""A coordinate moves in a mode if its amplitude exceeds this fraction of the largest."""
+
+
+@jax.custom_jvp
+def generalized_eigvals(K, M):
+    """Eigenvalues (ascending) of ``K v = lambda M v`` for symmetric ``K``, SPD ``M``.
+
+    Differentiable at repeated eigenvalues: the JVP is ``v^T (dK - lambda dM) v`` per
+    mass-normalised eigenvector, where ``jnp.linalg.eigh`` alone gives NaN gradients
+    for the triple planet modes.
+    """
+    return _generalized_eigh(K, M)[0]
+
+
+@generalized_eigvals.defjvp
+def _generalized_eigvals_jvp(primals, tangents):
+    K, M = primals
+    dK, dM = tangents
+    lam, V = _generalized_eigh(K, M)
+    dlam = jnp.einsum("ik,ij,jk->k", V, dK, V) - lam * jnp.einsum("ik,ij,jk->k", V, dM, V)
+    return lam, dlam
+
+
+def _generalized_eigh(K, M):
+    """Eigenvalues and M-normalised eigenvectors (columns) of ``K v = lambda M v``."""
+    L = jnp.linalg.cholesky(0.5 * (M + M.T))
+    Linv_K = jax.scipy.linalg.solve_triangular(L, 0.5 * (K + K.T), lower=True)
+    A = jax.scipy.linalg.solve_triangular(L, Linv_K.T, lower=True)
+    lam, U = jnp.linalg.eigh(0.5 * (A + A.T))
+    V = jax.scipy.linalg.solve_triangular(L.T, U, lower=False)
+    return lam, V
+
+
+@dataclasses.dataclass(frozen=True)
+class Mode:
+    """One mode. ``shape``: coordinate label -> amplitude, largest magnitude 1 (positive);
+    ``energy``: share of strain energy per spring class and ``mesh``; ``multiplicity``:
+    size of the group of repeated frequencies it belongs to."""
+
+    hz: float
+    multiplicity: int
+    cls: str
+    family: str
+    stage: str | None
+    shape: dict[str, float]
+    energy: dict[str, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class ModalResult:
+    modes: tuple[Mode, ...]
+
+    @property
+    def elastic_hz(self) -> list[float]:
+        """Elastic natural frequencies (Hz), ascending, repeated modes repeated."""
+        return [m.hz for m in self.modes if m.cls == "elastic"]
+
+    def elastic_multiplicities(self) -> list[int]:
+        """Multiplicity of each distinct elastic frequency, ascending."""
+        out, seen = [], 0
+        elastic = [m for m in self.modes if m.cls == "elastic"]
+        while seen < len(elastic):
+            out.append(elastic[seen].multiplicity)
+            seen += elastic[seen].multiplicity
+        return out
+
+
+def modes(system: System) -> ModalResult:
+    """Natural frequencies (Hz), shapes, multiplicities, classes and families."""
+    lam, V = (np.asarray(a) for a in _generalized_eigh(system.mean_stiffness(), system.M))
+    hz = np.sqrt(np.clip(lam, 0.0, None)) / (2 * np.pi)
+    S = np.asarray(system.spring_rows)
+    ks = np.asarray(system.spring_stiffness)
+    W = np.asarray(system.W)
+    kbar = np.asarray(system.kbar)
+    spring_energy = 0.5 * ks[:, None] * (S @ V) ** 2  # (s, n)
+    mesh_energy = 0.5 * kbar[:, None] * (W @ V) ** 2  # (m, n)
+    classes = np.asarray(system.spring_class)
+    groups = _repeated_groups(hz)
+    out = []
+    for k in range(len(hz)):
+        shares = {c: float(spring_energy[classes == c, k].sum()) for c in ("elastic", "penalty",
+                                                                           "rigid")}
+        shares["mesh"] = float(mesh_energy[:, k].sum())
+        total = sum(shares.values())
+        shares = {c: (e / total if total > 0 else 0.0) for c, e in shares.items()}
+        if total <= 0 or shares["rigid"] > 0.5:
+            cls = "rigid"
+        elif shares["penalty"] > 0.5:
+            cls = "penalty"
+        else:
+            cls = "elastic"
+        v = V[:, k]
+        big = np.argmax(np.abs(v))
+        v = v / v[big]
+        family, stage = _family(system, v)
+        out.append(Mode(hz=float(hz[k]), multiplicity=groups[k], cls=cls, family=family,
+                        stage=stage, shape=dict(zip(system.dof_labels, np.where(
+                            np.abs(v) < 1e-12, 0.0, v).tolist())), energy=shares))
+    return ModalResult(modes=tuple(out))
+
+
+def _repeated_groups(hz: np.ndarray) -> list[int]:
+    sizes = [1] * len(hz)
+    start = 0
+    for k in range(1, len(hz) + 1):
+        if k == len(hz) or abs(hz[k] - hz[start]) > REPEATED_RTOL * max(hz[k], 1.0):
+            for j in range(start, k):
+                sizes[j] = k - start
+            start = k
+    return sizes
+
+
+def _family(system: System, v: np.ndarray) -> tuple[str, str | None]:
+    moving = np.abs(v) > STILL_ATOL
+    kinds = np.asarray(system.dof_kind)
+    groups = np.asarray(system.dof_group)
+    if kinds.size and not np.any(moving & (kinds != "planet")):
+        stages = set(groups[moving].tolist())
+        if len(stages) == 1:
+            return "planet", stages.pop()
+    return "overall", None

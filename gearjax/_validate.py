@@ -1,0 +1,108 @@
+"""Whole-train rules: member paths, clutches, planet overlap, kinematics; geometry warnings.
+
+Single-value rules (signs, types, ranges) are checked while reading (``_toml_io``);
+this module checks what needs the whole train. Errors are ``TrainError`` with one
+line naming file, field, value and rule; the geometry rules of standard gears
+(concentricity, assembly) are warnings because published data break them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._errors import fail, warn_geometry
+from ._kinematics import kinematics
+from ._train import MEMBERS, Train
+
+
+def validate_train(train: Train, *, emit_warnings: bool = True) -> list[str]:
+    """Check a train; raise ``TrainError`` on impossible input.
+
+    **Returns:** the geometry warnings (also issued as ``GeometryWarning`` when
+    ``emit_warnings``).
+    """
+    src = train.source
+    ids = train.stage_ids
+    valid_paths = [f"{sid}.{m}" for sid in ids for m in MEMBERS]
+
+    def check_path(field: str, path: str) -> None:
+        if path not in valid_paths:
+            raise fail(src, field, path,
+                       f"unknown member path; expected STAGE.sun|ring|carrier with STAGE in "
+                       f"{list(ids)}")
+
+    for s in train.stages:
+        _check_overlap(train, s)
+    gears = train.gear_names
+    for i, c in enumerate(train.couplings):
+        field = f"couplings[{i}]" + (f" (id {c.id!r})" if c.id else "")
+        for path in c.members:
+            check_path(field + ".members", path)
+        if c.members[0] == c.members[1]:
+            # interface.md asks for members of different stages; a lock-up clutch joins two
+            # members of one stage (sun and carrier), so only a self-coupling is refused
+            raise fail(src, field + ".members", list(c.members),
+                       "a coupling joins two different members")
+        for name in c.gears or ():
+            if name not in gears:
+                raise fail(src, field + ".gears", name,
+                           f"the clutch names a gear that does not exist; gears are {list(gears)}")
+    for g in train.gears:
+        f = f"gears.{g.name}"
+        check_path(f + ".input", g.input)
+        check_path(f + ".output", g.output)
+        for b in g.brakes:
+            check_path(f + ".brakes", b)
+            if b in (g.input, g.output):
+                raise fail(src, f + ".brakes", b, "the input and the output cannot be braked")
+        if g.input == g.output:
+            raise fail(src, f + ".output", g.output, "the output must differ from the input")
+        kinematics(train, g.name)  # raises on undetermined or locked speeds
+
+    messages = geometry_warnings(train)
+    if emit_warnings:
+        for m in messages:
+            warn_geometry(m)
+    return messages
+
+
+def geometry_warnings(train: Train) -> list[str]:
+    """Concentricity and assembly rules of standard gears, with the numbers."""
+    out = []
+    where = train.source or train.name
+    for s in train.stages:
+        zs, zp, zr = s.teeth.sun, s.teeth.planet, s.teeth.ring
+        if zr != zs + 2 * zp:
+            gap = float(s.module_mm) * (zr - zs - 2 * zp) / 2
+            out.append(
+                f"{where}: stage {s.id!r} teeth sun {zs}, planet {zp}, ring {zr}: concentricity "
+                f"rule Z_r = Z_s + 2 Z_p fails ({zs} + 2*{zp} = {zs + 2 * zp} != {zr}), a "
+                f"centre-distance mismatch of {gap:+.3g} mm at module {float(s.module_mm):g} mm; "
+                "data kept as given"
+            )
+        for i, psi in enumerate(np.asarray(s.planet_angles_deg)):
+            q = (zs + zr) * psi / 360.0
+            if abs(q - round(q)) > 1e-6:
+                out.append(
+                    f"{where}: stage {s.id!r} planet {i + 1} at {psi:g} deg: assembly rule "
+                    f"(Z_s + Z_r) psi / 360 = {zs + zr}*{psi:g}/360 = {q:.4g} is not an integer"
+                )
+    return out
+
+
+def _check_overlap(train: Train, s) -> None:
+    psi = np.deg2rad(np.asarray(s.planet_angles_deg))
+    rc = float(s.carrier_radius()) * 1e3
+    tip = float(s.module_mm) * (s.teeth.planet + 2)
+    for i in range(len(psi)):
+        for j in range(i + 1, len(psi)):
+            gap = 2 * rc * math.sin((psi[j] - psi[i]) / 2)
+            if abs(gap) <= tip:
+                raise fail(
+                    train.source, f"{s.id}.planet_angles_deg",
+                    np.asarray(s.planet_angles_deg).tolist(),
+                    f"planets {i + 1} and {j + 1} overlap: centre distance 2 r_c sin(dpsi/2) = "
+                    f"{abs(gap):.4g} mm must exceed the tip diameter m (Z_p + 2) = {tip:.4g} mm",
+                )
