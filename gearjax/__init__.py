@@ -2,6 +2,7 @@
 
 from . import _config  # noqa: F401  (float64 on import)
 from ._assembly import assemble as assemble
+from ._calibrate import CalibrationResult as CalibrationResult, calibrate as calibrate
 from ._errors import GeometryWarning as GeometryWarning, TrainError as TrainError
 from ._kinematics import Kinematics as Kinematics, kinematics as kinematics
 from ._mesh import (
@@ -12,6 +13,7 @@ from ._mesh import (
     stiffness_amplitudes as stiffness_amplitudes,
 )
 from ._modal import ModalResult as ModalResult, generalized_eigvals as generalized_eigvals, modes as modes
+from ._paths import get_path as get_path, set_path as set_path, continuous_paths as continuous_paths
 from ._static import StaticLoads as StaticLoads, static_deflection as static_deflection, static_loads as static_loads
 from ._system import System as System, system_from_matrices as system_from_matrices
 from ._toml_io import (

@@ -16,6 +16,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
+from ._config import require_x64
 from ._kinematics import Kinematics, kinematics
 from ._mesh import harmonic_phases, stiffness_amplitudes
 from ._system import System
@@ -31,6 +32,7 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
     ratio`` on the output, ``drag_torque`` against the motion of every other free
     member; ripple on the input member at its orders of the input speed.
     """
+    require_x64()
     g = train.gear(gear)
     kin = kinematics(train, g.name) if kin is None else kin
     n = train.n_dof

@@ -29,6 +29,8 @@ def warn_geometry(message: str) -> None:
 
 
 def _show(value) -> str:
+    if value is None:  # TOML has no null: None is a key that is absent
+        return "(missing)"
     if isinstance(value, str):
         return repr(value)
     text = repr(value)

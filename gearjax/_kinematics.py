@@ -100,7 +100,7 @@ def kinematics(train: Train, gear: str | None = None) -> Kinematics:
     def row(coefs: dict[str, int], rhs=0):
         r = [Fraction(0)] * n
         for p, c in coefs.items():
-            r[index[_canonical(p)]] += c
+            r[index[p]] += c
         rows.append((r, Fraction(rhs)))
 
     for s in train.stages:
@@ -122,7 +122,7 @@ def kinematics(train: Train, gear: str | None = None) -> Kinematics:
                    f"brakes and clutches leave the speeds undetermined ({names} can turn freely); "
                    "add a brake or engage a clutch")
     speeds = dict(zip(paths, solution))
-    w_out = speeds[_canonical(g.output)]
+    w_out = speeds[g.output]
     if w_out == 0:
         raise fail(train.source, where + ".output", g.output,
                    "the output is held still in this gear (its speed is 0), so the ratio is undefined")
@@ -141,14 +141,13 @@ def kinematics(train: Train, gear: str | None = None) -> Kinematics:
             load=load,
             loaded=(load != 0) if load is not None else True,
         ))
-    orders = [Fraction(str(float(o))) for o in _ripple_orders(g)]
+    orders = [Fraction(str(o)) for o in g.ripple_orders]
     freqs = [st.mesh_frequency for st in stages]
-    if any(f != 0 for f in freqs):
-        base = _rational_gcd([f for f in freqs if f != 0] + orders)
-        mu = tuple(int(f / base) for f in freqs)
-        ripple_mu = tuple(int(o / base) for o in orders)
-    else:
-        base, mu, ripple_mu = None, None, ()
+    nonzero = [f for f in freqs if f != 0] + orders
+    base = _rational_gcd(nonzero) if nonzero else None
+    ripple_mu = tuple(int(o / base) for o in orders)
+    # no turning mesh: nothing to solve at a mesh frequency (the ripple alone keeps a base)
+    mu = tuple(int(f / base) for f in freqs) if any(f != 0 for f in freqs) else None
     return Kinematics(gear=g.name, speeds=speeds, ratio=ratio, stages=tuple(stages), mu=mu,
                       base=base, ripple_mu=ripple_mu)
 
@@ -170,16 +169,6 @@ def require_base(kin: Kinematics, source: str | None = None) -> tuple[int, ...]:
 
 def _config(g) -> str:
     return f"input {g.input}, brakes {list(g.brakes)}"
-
-
-def _canonical(path: str) -> str:
-    return path
-
-
-def _ripple_orders(g) -> list[float]:
-    import numpy as np
-
-    return [float(o) for o in np.asarray(g.input_torque_ripple)[:, 2]]
 
 
 def _rational_gcd(values: list[Fraction]) -> Fraction:

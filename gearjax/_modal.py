@@ -101,6 +101,10 @@ def modes(system: System) -> ModalResult:
     mesh_energy = 0.5 * kbar[:, None] * (W @ V) ** 2  # (m, n)
     classes = np.asarray(system.spring_class)
     groups = _repeated_groups(hz)
+    # an exact rigid-body mode (housing.free = 0 and the brakes leave the train free to turn)
+    # has eigenvalue zero up to round-off; its strain-energy shares are round-off too (mostly
+    # "mesh"), so it is classed rigid by its eigenvalue
+    zero = lam <= lam.size * np.finfo(lam.dtype).eps * np.max(np.abs(lam))
     out = []
     for k in range(len(hz)):
         shares = {c: float(spring_energy[classes == c, k].sum()) for c in ("elastic", "penalty",
@@ -108,7 +112,7 @@ def modes(system: System) -> ModalResult:
         shares["mesh"] = float(mesh_energy[:, k].sum())
         total = sum(shares.values())
         shares = {c: (e / total if total > 0 else 0.0) for c, e in shares.items()}
-        if total <= 0 or shares["rigid"] > 0.5:
+        if total <= 0 or zero[k] or shares["rigid"] > 0.5:
             cls = "rigid"
         elif shares["penalty"] > 0.5:
             cls = "penalty"

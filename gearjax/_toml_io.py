@@ -242,8 +242,9 @@ def _gear(r: _Reader, name: str, raw) -> Gear:
         output=paths["output"],
         brakes=tuple(brakes),
         input_torque=r.number(raw, "input_torque", f + ".input_torque"),
-        input_torque_ripple=jnp.asarray(ripple),
+        input_torque_ripple=jnp.asarray(ripple[:, :2]),
         drag_torque=r.number(raw, "drag_torque", f + ".drag_torque", default=0.0, low=0.0),
+        ripple_orders=tuple(float(o) for o in ripple[:, 2]),
         note=note,
     )
 
@@ -296,9 +297,10 @@ class _Reader:
     def integer(self, raw, key, field, *, default=_MISSING, low=None, rule=None) -> int:
         value = self._get(raw, key, field, default)
         if isinstance(value, bool) or not isinstance(value, int):
-            if isinstance(value, float) and value.is_integer() and low is not None and value >= low:
+            # a type error names the type rule, never the range rule (30.5 teeth is not "< 1")
+            if isinstance(value, float) and value.is_integer():
                 raise self.fail(field, value, "must be an integer (no decimal point)")
-            raise self.fail(field, value, rule or "must be an integer")
+            raise self.fail(field, value, "must be an integer")
         if low is not None and value < low:
             raise self.fail(field, value, rule or f"must be >= {low}")
         return value
@@ -404,7 +406,8 @@ def train_to_dict(train: Train) -> dict:
              "input_torque": _f(g.input_torque)}
         ripple = np.asarray(g.input_torque_ripple)
         if ripple.size:
-            d["input_torque_ripple"] = [[_f(v) for v in row] for row in ripple]
+            d["input_torque_ripple"] = [[_f(a), _f(ph), float(o)]
+                                        for (a, ph), o in zip(ripple, g.ripple_orders)]
         d["drag_torque"] = _f(g.drag_torque)
         if g.note is not None:
             d["note"] = g.note

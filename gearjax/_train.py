@@ -122,8 +122,10 @@ class Housing(eqx.Module):
 class Gear(eqx.Module):
     """A power-flow configuration: input, output, brakes and loads.
 
-    ``input_torque_ripple`` has shape ``(L, 3)``, rows ``(amplitude [N m], phase [deg],
-    order)`` with order a multiple of the input shaft speed.
+    ``input_torque_ripple`` has shape ``(L, 2)``, rows ``(amplitude [N m], phase [deg])``
+    at ``ripple_orders`` (static: they set frequencies, so they are structure), each a
+    multiple of the input shaft speed. The train file writes the three together as
+    ``[[amplitude, phase_deg, order], ...]``.
     """
 
     name: str = eqx.field(static=True)
@@ -131,8 +133,9 @@ class Gear(eqx.Module):
     output: str = eqx.field(static=True)
     brakes: tuple[str, ...] = eqx.field(static=True)
     input_torque: Float[Array, ""]
-    input_torque_ripple: Float[Array, "L 3"]
+    input_torque_ripple: Float[Array, "L 2"]
     drag_torque: Float[Array, ""]
+    ripple_orders: tuple[float, ...] = eqx.field(static=True, default=())
     note: str | None = eqx.field(static=True, default=None)
 
 
@@ -178,10 +181,10 @@ class Train(eqx.Module):
         for g in self.gears:
             if g.name == name:
                 return g
-        raise ValueError(
-            f"{self.source or self.name}: gear {name!r} does not exist; "
-            f"gears are {list(self.gear_names)}"
-        )
+        from ._errors import fail
+
+        raise fail(self.source, "--gear", name,
+                   f"no such gear; gears are {list(self.gear_names)}")
 
     def engaged_couplings(self, gear: str) -> tuple[Coupling, ...]:
         return tuple(c for c in self.couplings if c.engaged(gear))

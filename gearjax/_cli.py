@@ -1,0 +1,262 @@
+"""The ``gearjax`` command line (interface.md): info, modes, calibrate.
+
+Exit codes: 0 finished; 2 bad input or usage (one line on stderr, no traceback);
+3 finished but nothing converged. ``--json`` prints one JSON object on stdout and
+nothing else there; warnings go to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import warnings
+from fractions import Fraction
+
+from ._errors import GeometryWarning, TrainError, fail
+
+EXIT_OK, EXIT_INPUT, EXIT_NOT_CONVERGED = 0, 2, 3
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help(sys.stderr)
+        return EXIT_INPUT
+    try:
+        from ._toml_io import load_train
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", GeometryWarning)
+            train = load_train(args.train)
+        notes = [str(w.message) for w in caught if issubclass(w.category, GeometryWarning)]
+        for note in notes:
+            print(f"warning: {note}", file=sys.stderr)
+        return args.run(args, train, notes)
+    except TrainError as e:
+        print(f"gearjax: error: {e}", file=sys.stderr)
+        return EXIT_INPUT
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="gearjax",
+        description="Dynamics of compound planetary gear trains. TRAIN defaults to the bundled "
+                    "Al-shyyab et al. (2009) case.",
+    )
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
+    def command(name: str, run, help: str) -> argparse.ArgumentParser:
+        c = sub.add_parser(name, help=help, description=help)
+        c.add_argument("train", nargs="?", default=None, metavar="TRAIN",
+                       help="train file (TOML); default: the bundled paper case")
+        c.add_argument("--gear", default=None, help="gear name (default: first in the file)")
+        c.add_argument("--json", action="store_true", help="one JSON object on stdout")
+        c.set_defaults(run=run)
+        return c
+
+    c = command("info", _info, "kinematics, phasing and static loads of a gear")
+    c.add_argument("--input-rpm", type=float, default=1000.0, help="input speed (rpm)")
+    c = command("modes", _modes, "natural frequencies, shapes and classes of a gear")
+    c.add_argument("--plot", metavar="FIG", help="write the elastic mode shapes to FIG")
+    c = command("calibrate", _calibrate, "fit parameters to target natural frequencies")
+    c.add_argument("--targets-hz", type=float, nargs="+", required=True, metavar="F",
+                   help="target elastic frequencies (Hz), ascending, repeated modes repeated")
+    c.add_argument("--free", nargs="+", required=True, metavar="PATH",
+                   help="TOML paths to fit, e.g. 1.inertia.sun 2.planet_mass")
+    c.add_argument("--out-train", metavar="FILE.toml", help="write the calibrated train")
+    return p
+
+
+# ----------------------------------------------------------------------------- info
+
+
+def _info(args, train, notes) -> int:
+    from ._kinematics import kinematics
+    from ._mesh import phasing_report
+    from ._static import static_loads
+
+    if not (args.input_rpm > 0 and math.isfinite(args.input_rpm)):
+        raise fail("command line", "--input-rpm", args.input_rpm, "must be a positive speed in rpm")
+    g = train.gear(args.gear)
+    kin = kinematics(train, g.name)
+    loads = static_loads(train, g.name)
+    phasing = {}
+    for s, sk in zip(train.stages, kin.stages):
+        phasing[s.id] = [
+            {"h": r.h, "k": r.k, "kind": r.kind, "signs": r.signs, "sun_deg": list(r.sun_deg),
+             "ring_deg": list(r.ring_deg)}
+            for r in phasing_report(s, sk.sigma, train.phasing, train.stiffness_harmonics)
+        ] if sk.turning else []
+    out = {
+        "train": train.name,
+        "gear": g.name,
+        "input": g.input,
+        "output": g.output,
+        "brakes": list(g.brakes),
+        "note": g.note,
+        "ratio": float(kin.ratio),
+        "ratio_exact": str(kin.ratio),
+        "mu": list(kin.mu) if kin.mu is not None else None,
+        "dof": train.n_dof,
+        "input_rpm": args.input_rpm,
+        "stages": [
+            {"id": s.id, "loaded": s.loaded, "turning": s.turning, "sigma": s.sigma,
+             "mesh_frequency_hz": kin.mesh_frequency_hz(s.id, args.input_rpm),
+             "planet_speed": float(s.planet_speed), "planet_speed_exact": str(s.planet_speed)}
+            for s in kin.stages
+        ],
+        "member_speeds": {p: float(w) for p, w in kin.speeds.items()},
+        "member_speeds_exact": {p: str(w) for p, w in kin.speeds.items()},
+        "static": {
+            name: {"force": f, "torque": loads.mesh_torque[name]}
+            for name, f in loads.mesh_force.items()
+        },
+        "brake_reactions": loads.brake_reaction,
+        "housing_leak": loads.leak,
+        "torque_balance": loads.balance,
+        "phasing": phasing,
+        "warnings": notes,
+    }
+    if args.json:
+        return _emit(out)
+    print(f"{train.name}: gear {g.name!r} (input {g.input}, output {g.output}, "
+          f"brakes {', '.join(g.brakes) or 'none'})" + (f"  [{g.note}]" if g.note else ""))
+    mu = "null (no mesh turns)" if kin.mu is None else str(tuple(kin.mu))
+    print(f"ratio {kin.ratio} = {float(kin.ratio):.6g}   mu = {mu}   {train.n_dof} DOF")
+    print(f"\n{'stage':>6} {'loaded':>7} {'mesh Hz @ %g rpm' % args.input_rpm:>20} {'sigma':>6}"
+          f" {'planet/carrier':>15}")
+    for s in out["stages"]:
+        print(f"{s['id']:>6} {str(s['loaded']):>7} {s['mesh_frequency_hz']:>20.2f} "
+              f"{s['sigma']:>6} {s['planet_speed_exact']:>15}")
+    print("\nmember speeds per unit input speed:")
+    print("  " + "   ".join(f"{p} {w}" for p, w in kin.speeds.items()))
+    print("\nstatic mesh forces (N) and torques (N m), mean stiffness, no backlash:")
+    for name, v in out["static"].items():
+        print(f"  {name:>7} {v['force']:>12.1f} N {v['torque']:>10.2f} N m")
+    for path, t in loads.brake_reaction.items():
+        print(f"brake {path} reacts {t:.2f} N m")
+    print(f"through the free housing springs: {loads.leak:.3g} N m; "
+          f"torque balance residual {loads.balance:.2g} N m")
+    for sid, rows in phasing.items():
+        if rows:
+            print(f"\nstage {sid} stiffness phasing (Parker & Lin, k = h Z_s mod N):")
+            for r in rows:
+                print(f"  h={r['h']}  k={r['k']}  {r['kind']:<15} sun meshes {r['signs']}")
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------------- modes
+
+
+def _modes(args, train, notes) -> int:
+    from ._assembly import assemble
+    from ._modal import REPEATED_RTOL, modes
+
+    g = train.gear(args.gear)
+    result = modes(assemble(train, g.name))
+    out = {
+        "train": train.name,
+        "gear": g.name,
+        "elastic_hz": result.elastic_hz,
+        "repeated_rtol": REPEATED_RTOL,
+        "modes": [
+            {"hz": m.hz, "multiplicity": m.multiplicity, "class": m.cls, "family": m.family,
+             "stage": m.stage, "shape": m.shape, "energy": m.energy}
+            for m in result.modes
+        ],
+        "warnings": notes,
+    }
+    if args.plot:
+        from ._plot import plot_mode_shapes
+
+        plot_mode_shapes(result, args.plot, title=f"{train.name}: gear {g.name}, elastic modes")
+    if args.json:
+        return _emit(out)
+    print(f"{train.name}: gear {g.name!r}, {len(result.modes)} modes "
+          f"(repeated when within {REPEATED_RTOL:g} relative)")
+    print(f"{'kHz':>10} {'mult':>4} {'class':>8} {'family':>14}  largest coordinates")
+    for m in result.modes:
+        fam = f"planet {m.stage}" if m.family == "planet" else m.family
+        top = sorted(m.shape.items(), key=lambda kv: -abs(kv[1]))[:3]
+        print(f"{m.hz / 1e3:>10.4f} {m.multiplicity:>4} {m.cls:>8} {fam:>14}  "
+              + ", ".join(f"{k} {v:+.2f}" for k, v in top))
+    if args.plot:
+        print(f"mode shapes written to {args.plot}")
+    return EXIT_OK
+
+
+# ------------------------------------------------------------------------ calibrate
+
+
+def _calibrate(args, train, notes) -> int:
+    from ._calibrate import calibrate
+    from ._toml_io import save_train
+
+    g = train.gear(args.gear)
+    result = calibrate(train, args.targets_hz, args.free, g.name)
+    if args.out_train:
+        save_train(result.train, args.out_train)
+    out = {
+        "train": train.name,
+        "gear": g.name,
+        "free": list(result.free),
+        "initial": result.initial,
+        "fitted": result.fitted,
+        "targets_hz": list(result.targets_hz),
+        "model_hz": list(result.model_hz),
+        "residual_hz": list(result.residual_hz),
+        "residual_rel": list(result.residual_rel),
+        "converged": result.converged,
+        "message": result.message,
+        "nfev": result.nfev,
+        "at_bound": list(result.at_bound),
+        "out_train": args.out_train,
+        "warnings": notes,
+    }
+    code = EXIT_OK if result.converged else EXIT_NOT_CONVERGED
+    if args.json:
+        _emit(out)
+        return code
+    print(f"calibration of {', '.join(result.free)} on gear {g.name!r}: "
+          f"{'converged' if result.converged else 'NOT converged'} ({result.message}, "
+          f"{result.nfev} evaluations)")
+    print(f"{'target Hz':>12} {'model Hz':>12} {'residual':>10}")
+    for t, m, r in zip(result.targets_hz, result.model_hz, result.residual_rel):
+        print(f"{t:>12.2f} {m:>12.2f} {100 * r:>9.4f}%")
+    print(f"{'parameter':>20} {'initial':>12} {'fitted':>12}")
+    for p in result.free:
+        flag = "  (at bound)" if p in result.at_bound else ""
+        print(f"{p:>20} {result.initial[p]:>12.5g} {result.fitted[p]:>12.5g}{flag}")
+    if args.out_train:
+        print(f"calibrated train written to {args.out_train}")
+    return code
+
+
+# ----------------------------------------------------------------------------- JSON
+
+
+def _emit(obj) -> int:
+    print(json.dumps(_json_safe(obj), allow_nan=False, indent=1))
+    return EXIT_OK
+
+
+def _json_safe(obj):
+    """Replace NaN/inf with null (interface.md: JSON never holds NaN or Infinity)."""
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, Fraction):
+        return float(obj)
+    if hasattr(obj, "item") and not isinstance(obj, str):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+if __name__ == "__main__":
+    sys.exit(main())
