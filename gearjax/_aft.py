@@ -31,20 +31,23 @@ def synthesis(X: jnp.ndarray, n_time: int) -> jnp.ndarray:
     K = (X.shape[0] - 1) // 2
     if n_time < 2 * K + 2:
         raise ValueError(f"{n_time} time samples cannot carry {K} harmonics (need >= {2 * K + 2})")
-    spectrum = jnp.zeros((n_time // 2 + 1,) + X.shape[1:], dtype=jnp.complex128)
-    spectrum = spectrum.at[0].set(n_time * X[0])
-    spectrum = spectrum.at[1: K + 1].set(0.5 * n_time * (X[1::2] - 1j * X[2::2]))
-    return jnp.fft.irfft(spectrum, n=n_time, axis=0)
+    # FFTs run along the last axis: XLA's CPU FFT rejects other layouts inside loops
+    Xt = jnp.moveaxis(X, 0, -1)
+    spectrum = jnp.zeros(Xt.shape[:-1] + (n_time // 2 + 1,), dtype=jnp.complex128)
+    spectrum = spectrum.at[..., 0].set(n_time * Xt[..., 0])
+    spectrum = spectrum.at[..., 1: K + 1].set(0.5 * n_time * (Xt[..., 1::2] - 1j * Xt[..., 2::2]))
+    return jnp.moveaxis(jnp.fft.irfft(spectrum, n=n_time, axis=-1), -1, 0)
 
 
 def analysis(x: jnp.ndarray, n_harmonics: int) -> jnp.ndarray:
     """Coefficients ``(2K+1, ...)`` of samples ``x`` ``(T, ...)`` (the first ``K`` harmonics)."""
     n_time = x.shape[0]
-    spectrum = jnp.fft.rfft(x, axis=0)[: n_harmonics + 1] / n_time
-    out = jnp.zeros((2 * n_harmonics + 1,) + x.shape[1:])
-    out = out.at[0].set(spectrum[0].real)
-    out = out.at[1::2].set(2 * spectrum[1:].real)
-    return out.at[2::2].set(-2 * spectrum[1:].imag)
+    spectrum = jnp.fft.rfft(jnp.moveaxis(x, 0, -1), axis=-1)[..., : n_harmonics + 1] / n_time
+    out = jnp.zeros(spectrum.shape[:-1] + (2 * n_harmonics + 1,))
+    out = out.at[..., 0].set(spectrum[..., 0].real)
+    out = out.at[..., 1::2].set(2 * spectrum[..., 1:].real)
+    out = out.at[..., 2::2].set(-2 * spectrum[..., 1:].imag)
+    return jnp.moveaxis(out, -1, 0)
 
 
 def derivative(X: jnp.ndarray) -> jnp.ndarray:

@@ -1,0 +1,357 @@
+"""Pseudo-arclength continuation of harmonic-balance solutions in a scalar parameter.
+
+The branch ``G(y, lambda) = 0`` (scaled HB residual, scaled unknowns ``y``) is
+followed in arclength ``s`` of ``z = (y, lambda)``: tangent predictor
+``z + h t``, bordered Newton corrector on ``[G(z); t . (z - z_pred)] = 0``, new
+tangent from the bordered system (its last row keeps the orientation), adaptive
+step, folds where ``d lambda / ds`` changes sign, located by Hermite interpolation
+of ``lambda(s)`` between the two points. The parameter is the frequency
+(``FrequencyParameter``, ``lambda = Omega / Omega_ref``) or any scalar that scales a
+field of the ``System`` (``SystemParameter``: torque, backlash, damping, ...).
+
+One step is one jittable function (``arclength_step``), driven either from Python
+(``continue_branch``: progress, journaling, resumable) or entirely compiled in a
+``lax.while_loop`` (``continue_compiled``: small systems, where per-call overhead
+would dominate).
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array
+
+from . import _hb
+
+STOP_REASONS = ("reached_end", "max_points", "step_too_small", "nonfinite")
+REACHED_END, MAX_POINTS, STEP_TOO_SMALL, STOP_NONFINITE = range(4)
+
+
+class AbstractParameter(eqx.Module):
+    """A residual ``G(y, lambda)`` of scaled HB unknowns and one scalar parameter."""
+
+    problem: eqx.AbstractVar[_hb.HBProblem]
+
+    @abc.abstractmethod
+    def split(self, lam) -> tuple[_hb.HBProblem, Array]:
+        """The problem and base frequency (rad/s) at parameter value ``lam``."""
+
+    def residual(self, y, lam):
+        problem, omega = self.split(lam)
+        return _hb.residual(problem, y, omega)
+
+    def jacobian(self, y, lam):
+        problem, omega = self.split(lam)
+        return _hb.jacobian(problem, y, omega)
+
+    def d_lambda(self, y, lam):
+        return jax.jvp(lambda l: self.residual(y, l), (lam,), (jnp.ones_like(lam),))[1]
+
+    def omega(self, lam):
+        return self.split(lam)[1]
+
+
+class FrequencyParameter(AbstractParameter):
+    """``lambda = Omega / omega_ref``: a frequency sweep."""
+
+    problem: _hb.HBProblem
+    omega_ref: Array
+
+    def split(self, lam):
+        return self.problem, lam * self.omega_ref
+
+
+class SystemParameter(AbstractParameter):
+    """``lambda`` scales one ``System`` field at fixed frequency: ``field = lambda * base``.
+
+    ``where`` selects the field (e.g. ``lambda s: s.backlash``); ``lambda`` from 0 to 1
+    is the homotopy from a linear start to the full backlash.
+    """
+
+    problem: _hb.HBProblem
+    omega_value: Array
+    where: Callable = eqx.field(static=True)
+
+    def split(self, lam):
+        base = self.where(self.problem.system)
+        system = eqx.tree_at(self.where, self.problem.system, lam * base)
+        return eqx.tree_at(lambda p: p.system, self.problem, system), self.omega_value
+
+
+class Settings(eqx.Module):
+    """Continuation settings (static).
+
+    ``step``: first arclength step (scaled units: unknowns in characteristic
+    lengths, lambda relative); ``min_step``, ``max_step``: bounds of the adaptive
+    step; ``max_dlambda``: largest parameter change per step; ``max_corrector``:
+    Newton iterations per point; ``fast``/``slow``: iteration counts that grow or
+    shrink the step; ``rtol``: corrector tolerance; ``fold_step``: a fold is only
+    accepted across a step this short (longer ones are retried shorter), which sets
+    the accuracy of the located fold.
+    """
+
+    step: float = eqx.field(static=True, default=0.02)
+    min_step: float = eqx.field(static=True, default=1e-7)
+    max_step: float = eqx.field(static=True, default=0.2)
+    max_dlambda: float = eqx.field(static=True, default=0.02)
+    max_corrector: int = eqx.field(static=True, default=15)
+    fast: int = eqx.field(static=True, default=5)
+    slow: int = eqx.field(static=True, default=10)
+    rtol: float = eqx.field(static=True, default=1e-9)
+    fold_step: float = eqx.field(static=True, default=1e-3)
+
+
+class ArcState(eqx.Module):
+    """Continuation state after a step attempt.
+
+    ``y``, ``lam``: last accepted point; ``ty``, ``tlam``: unit tangent there
+    (``tlam`` = d lambda / ds); ``h``: next step; ``accepted``: the attempt
+    succeeded; ``fold``: the accepted step crossed a fold (``tlam`` changed sign);
+    ``fold_lam``: its located parameter value; ``steps``: corrector iterations;
+    ``lu``, ``piv``: LU factors of the bordered Jacobian at the current point, reused
+    by the next corrector (chord Newton: one factorisation per point).
+    """
+
+    y: Array
+    lam: Array
+    ty: Array
+    tlam: Array
+    h: Array
+    accepted: Array
+    fold: Array
+    fold_lam: Array
+    steps: Array
+    lu: Array
+    piv: Array
+
+
+def _bordered(param: AbstractParameter, y, lam, ty, tlam):
+    J = param.jacobian(y, lam)
+    g = param.d_lambda(y, lam)
+    top = jnp.concatenate([J, g[:, None]], axis=1)
+    bottom = jnp.concatenate([ty, tlam[None]])[None, :]
+    return jnp.concatenate([top, bottom], axis=0)
+
+
+def _tangent_lu(param: AbstractParameter, y, lam, ty, tlam):
+    """Factorise the bordered Jacobian at ``(y, lam)`` (last row the previous tangent) and
+    return the new unit tangent with the factors."""
+    lu, piv = jax.scipy.linalg.lu_factor(_bordered(param, y, lam, ty, tlam))
+    t = jax.scipy.linalg.lu_solve((lu, piv), jnp.zeros(y.shape[0] + 1).at[-1].set(1.0))
+    t = t / jnp.linalg.norm(t)
+    return t[:-1], t[-1], lu, piv
+
+
+def tangent(param: AbstractParameter, y, lam, ty, tlam):
+    """Unit tangent at ``(y, lam)`` oriented along the previous tangent ``(ty, tlam)``."""
+    return _tangent_lu(param, y, lam, ty, tlam)[:2]
+
+
+def start(param: AbstractParameter, y, lam, direction, settings: Settings) -> ArcState:
+    """State at a converged point, tangent pointing to increasing ``lam`` if ``direction > 0``."""
+    lam = jnp.asarray(lam, float)
+    ty, tlam = tangent(param, y, lam, jnp.zeros_like(y), jnp.sign(direction) * 1.0)
+    ty, tlam, lu, piv = _tangent_lu(param, y, lam, ty, tlam)
+    return ArcState(y=y, lam=lam, ty=ty, tlam=tlam,
+                    h=jnp.asarray(settings.step, float), accepted=jnp.asarray(True),
+                    fold=jnp.asarray(False), fold_lam=jnp.asarray(jnp.nan),
+                    steps=jnp.asarray(0), lu=lu, piv=piv)
+
+
+def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings) -> ArcState:
+    """One predictor-corrector attempt from ``state`` (jittable).
+
+    The corrector is a chord Newton with the bordered Jacobian factorised at the
+    current point; the new point's Jacobian is factorised once, for its tangent and
+    for the next corrector. On success the state moves to the new point with a grown
+    or kept step; on failure it stays and the step halves (the caller stops below
+    ``min_step``).
+    """
+    h = jnp.minimum(state.h, settings.max_dlambda / jnp.maximum(jnp.abs(state.tlam), 1e-12))
+    y_p = state.y + h * state.ty
+    lam_p = state.lam + h * state.tlam
+
+    def cond(c):
+        _, _, k, done, _, _ = c
+        return (k < settings.max_corrector) & ~done
+
+    def body(c):
+        y, lam, k, _, _, prev = c
+        r = param.residual(y, lam)
+        arc = state.ty @ (y - y_p) + state.tlam * (lam - lam_p)
+        d = jax.scipy.linalg.lu_solve((state.lu, state.piv), -jnp.concatenate([r, arc[None]]))
+        size = jnp.max(jnp.abs(d))
+        finite = jnp.all(jnp.isfinite(d))
+        small = size <= settings.rtol * jnp.maximum(1.0, jnp.max(jnp.abs(y)))
+        ok = finite & small & (jnp.max(jnp.abs(r)) <= jnp.sqrt(settings.rtol))
+        diverging = (k > 1) & (size > prev)  # chord iterations must contract
+        return (jnp.where(finite, y + d[:-1], y), jnp.where(finite, lam + d[-1], lam), k + 1,
+                ok | ~finite | diverging, finite & ~diverging, jnp.where(k > 0, size, jnp.inf))
+
+    y, lam, k, done, finite, _ = jax.lax.while_loop(
+        cond, body,
+        (y_p, lam_p, jnp.asarray(0), jnp.asarray(False), jnp.asarray(True), jnp.asarray(jnp.inf)))
+    converged = done & finite
+
+    def new_tangent(_):
+        return _tangent_lu(param, y, lam, state.ty, state.tlam)
+
+    def old_tangent(_):
+        return state.ty, state.tlam, state.lu, state.piv
+
+    ty, tlam, lu, piv = jax.lax.cond(converged, new_tangent, old_tangent, None)
+    crossed = converged & (jnp.sign(tlam) != jnp.sign(state.tlam))
+    # a fold crossed with a long step is approached again with shorter ones, so that
+    # the interpolated fold location below is accurate
+    refine = crossed & (h > settings.fold_step)
+    accepted = converged & ~refine
+    fold = crossed & ~refine
+    # d lambda/ds taken linear in s between the two tangents (a, b) over the chord
+    # length h: zero at s* = h a / (a - b), where lambda = lam_old + a s* / 2
+    a, b = state.tlam, tlam
+    chord = jnp.sqrt(jnp.sum((y - state.y) ** 2) + (lam - state.lam) ** 2)
+    fold_lam = jnp.where(fold, state.lam + chord * a**2 / (2 * jnp.where(fold, a - b, 1.0)),
+                         jnp.nan)
+    grow = jnp.where(k <= settings.fast, 1.5, jnp.where(k >= settings.slow, 0.6, 1.0))
+    h_next = jnp.where(accepted, jnp.minimum(h * grow, settings.max_step),
+                       jnp.where(refine, jnp.maximum(h * 0.25, settings.fold_step), h * 0.5))
+    keep = lambda new, old: jnp.where(accepted, new, old)  # noqa: E731
+    return ArcState(
+        y=keep(y, state.y),
+        lam=keep(lam, state.lam),
+        ty=keep(ty, state.ty),
+        tlam=keep(tlam, state.tlam),
+        h=h_next,
+        accepted=accepted,
+        fold=fold,
+        fold_lam=fold_lam,
+        steps=k,
+        lu=keep(lu, state.lu),
+        piv=keep(piv, state.piv),
+    )
+
+
+class Branch(eqx.Module):
+    """Points of a continued branch (numpy arrays, in order along the branch).
+
+    ``y`` ``(P, N)``: scaled unknowns; ``lam`` ``(P,)``; ``omega`` ``(P,)`` base
+    frequency (rad/s); ``steps`` ``(P,)`` corrector iterations; ``fold`` ``(P,)``: a fold
+    lies between this point and the previous one; ``fold_lam`` ``(P,)`` its location
+    (NaN elsewhere); ``stop``: why continuation ended (``STOP_REASONS``).
+    """
+
+    y: np.ndarray
+    lam: np.ndarray
+    omega: np.ndarray
+    steps: np.ndarray
+    fold: np.ndarray
+    fold_lam: np.ndarray
+    tangent: np.ndarray
+    h: np.ndarray
+    stop: str = eqx.field(static=True)
+
+
+def distinct_folds(fold_lams, tol: float = 1e-3) -> np.ndarray:
+    """Fold locations with zig-zags merged: folds closer than ``tol`` form a cluster; an
+    odd cluster is one fold (at its median), an even one cancels (the discrete AFT of
+    a non-smooth force can make the tangent flip back and forth right at a fold)."""
+    lams = np.sort(np.asarray(fold_lams, float)[np.isfinite(fold_lams)])
+    out, group = [], []
+    for lam in lams:
+        if group and lam - group[-1] > tol:
+            if len(group) % 2:
+                out.append(float(np.median(group)))
+            group = []
+        group.append(lam)
+    if group and len(group) % 2:
+        out.append(float(np.median(group)))
+    return np.array(out)
+
+
+def continue_compiled(param: AbstractParameter, y0, lam0, lam_end, settings: Settings,
+                      max_points: int = 500):
+    """The whole continuation as one compiled ``lax.while_loop`` (fixed buffers).
+
+    **Returns:** ``(ys (max_points, N), lams, folds, fold_lams, n_points, stop_code)``;
+    rows past ``n_points`` are padding. Suited to small systems (the clearance
+    oscillator benchmark), where per-step Python overhead would dominate.
+    """
+    direction = jnp.sign(lam_end - lam0)
+    state = start(param, y0, lam0, direction, settings)
+    N = y0.shape[0]
+    ys = jnp.zeros((max_points, N)).at[0].set(y0)
+    lams = jnp.full((max_points,), jnp.nan).at[0].set(lam0)
+    folds = jnp.zeros((max_points,), bool)
+    fold_lams = jnp.full((max_points,), jnp.nan)
+
+    def cond(c):
+        st, _, _, _, _, n, code = c
+        return code < 0
+
+    def body(c):
+        st, ys, lams, folds, fold_lams, n, _ = c
+        new = arclength_step(param, st, settings)
+        ys = jnp.where(new.accepted, ys.at[n].set(new.y), ys)
+        lams = jnp.where(new.accepted, lams.at[n].set(new.lam), lams)
+        folds = jnp.where(new.accepted, folds.at[n].set(new.fold), folds)
+        fold_lams = jnp.where(new.accepted, fold_lams.at[n].set(new.fold_lam), fold_lams)
+        n = n + new.accepted.astype(n.dtype)
+        past = (new.lam - lam_end) * direction >= 0
+        code = jnp.where(
+            ~jnp.all(jnp.isfinite(new.y)), STOP_NONFINITE,
+            jnp.where(new.accepted & past, REACHED_END,
+                      jnp.where(n >= max_points, MAX_POINTS,
+                                jnp.where(new.h < settings.min_step, STEP_TOO_SMALL, -1))))
+        return new, ys, lams, folds, fold_lams, n, code
+
+    init = (state, ys, lams, folds, fold_lams, jnp.asarray(1), jnp.asarray(-1))
+    _, ys, lams, folds, fold_lams, n, code = jax.lax.while_loop(cond, body, init)
+    return ys, lams, folds, fold_lams, n, code
+
+
+def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Settings,
+                    max_points: int = 2000, on_point: Callable | None = None,
+                    state: ArcState | None = None) -> Branch:
+    """Continuation driven from Python: one jitted step per call, ``on_point(i, state)``
+    after each accepted point (progress, journaling). Keeps every point reached when
+    it has to stop, with the reason. ``state`` resumes from a saved state."""
+    step = _arclength_step_jit
+    direction = float(np.sign(lam_end - lam0))
+    if state is None:
+        state = _start_jit(param, y0, lam0, direction, settings)
+    rows = [(np.asarray(state.y), float(state.lam), 0, False, np.nan,
+             np.concatenate([np.asarray(state.ty), [float(state.tlam)]]), float(state.h))]
+    if on_point is not None:
+        on_point(0, state)
+    stop = "max_points"
+    while len(rows) < max_points:
+        state = step(param, state, settings)
+        if not bool(jnp.all(jnp.isfinite(state.y))):
+            stop = "nonfinite"
+            break
+        if bool(state.accepted):
+            rows.append((np.asarray(state.y), float(state.lam), int(state.steps),
+                         bool(state.fold), float(state.fold_lam),
+                         np.concatenate([np.asarray(state.ty), [float(state.tlam)]]),
+                         float(state.h)))
+            if on_point is not None:
+                on_point(len(rows) - 1, state)
+            if (float(state.lam) - lam_end) * direction >= 0:
+                stop = "reached_end"
+                break
+        elif float(state.h) < settings.min_step:
+            stop = "step_too_small"
+            break
+    y, lam, steps, fold, fold_lam, tan, h = (np.array(v) for v in zip(*rows))
+    omegas = np.array([float(param.omega(l)) for l in lam])
+    return Branch(y=np.stack(y), lam=lam, omega=omegas, steps=steps, fold=fold,
+                  fold_lam=fold_lam, tangent=np.stack(tan), h=h, stop=stop)
+
+
+_arclength_step_jit = jax.jit(arclength_step, static_argnums=(2,))
+_start_jit = jax.jit(start, static_argnums=(4,))

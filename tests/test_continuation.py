@@ -1,0 +1,92 @@
+"""Pseudo-arclength continuation through the folds of the clearance oscillator."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.integrate
+
+import gearjax as gj
+from gearjax import _aft, _continuation as C, _hb
+
+K, T = 15, 256
+
+
+def oscillator():
+    return gj.system_from_matrices([[1.0]], [[0.1]], [[0.0]], [[1.0]], [1.0], backlash=[1.0],
+                                   f_mean=[0.1], f_cos=[[0.03]], f_sin=[[0.0]], forcing_mu=[1])
+
+
+@pytest.fixture(scope="module")
+def branch():
+    problem = _hb.hb_problem(oscillator(), _hb.HarmonicBalance(n_harmonics=K, n_time=T))
+    param = C.FrequencyParameter(problem=problem, omega_ref=jnp.asarray(1.0))
+    settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02)
+    y0 = _hb.solve_hb(problem, 0.5).y
+    ys, lams, folds, fold_lams, n, code = jax.jit(
+        lambda y: C.continue_compiled(param, y, 0.5, 1.5, settings, 400))(y0)
+    n = int(n)
+    X = np.asarray(ys[:n]).reshape(n, 2 * K + 1, 1) * np.asarray(problem.x_scale)
+    x = np.asarray(jax.vmap(lambda c: _aft.synthesis(c, T))(jnp.asarray(X)))[..., 0]
+    return {"lam": np.asarray(lams[:n]), "amp": (x.max(1) - x.min(1)) / 2, "code": int(code),
+            "folds": C.distinct_folds(np.asarray(fold_lams[:n])[np.asarray(folds[:n])]),
+            "problem": problem, "param": param, "settings": settings, "y0": y0}
+
+
+def ivp_amplitude(omega, z0, periods=80):
+    """Independent reference: integrate x'' + 0.1x' + g(x) = 0.1 + 0.03 cos(w t)."""
+    def rhs(t, z):
+        x, v = z
+        return [v, 0.1 + 0.03 * np.cos(omega * t) - 0.1 * v - (x - np.clip(x, -1, 1))]
+
+    P = 2 * np.pi / omega
+    sol = scipy.integrate.solve_ivp(rhs, (0, periods * P), z0, rtol=1e-10, atol=1e-12,
+                                    t_eval=np.linspace((periods - 1) * P, periods * P, 2001))
+    return (sol.y[0].max() - sol.y[0].min()) / 2
+
+
+def test_reaches_the_end_through_both_folds(branch):
+    assert C.STOP_REASONS[branch["code"]] == "reached_end"
+    assert branch["lam"][-1] >= 1.5
+    # pyHarm and NLvib put the folds near 0.852 and 0.6365 (issue 3)
+    folds = np.sort(branch["folds"])
+    assert len(folds) == 2
+    np.testing.assert_allclose(folds, [0.6365, 0.852], atol=2e-3)
+    # the branch crosses Omega = 0.75 three times: lower, unstable middle, upper
+    crossings = np.sum(np.diff(np.sign(branch["lam"] - 0.75)) != 0)
+    assert crossings == 3
+    assert branch["amp"].max() == pytest.approx(0.4328, abs=2e-3)
+
+
+def test_coexisting_branches_match_time_integration(branch):
+    lam, amp = branch["lam"], branch["amp"]
+    near = np.where(np.diff(np.sign(lam - 0.75)) != 0)[0]
+    # amplitude where each segment crosses 0.75, interpolated linearly along the branch
+    hb_amps = sorted(amp[i] + (0.75 - lam[i]) / (lam[i + 1] - lam[i]) * (amp[i + 1] - amp[i])
+                     for i in near)
+    low_ref = ivp_amplitude(0.75, [1.1, 0.0])                 # contact start: low branch
+    high_ref = ivp_amplitude(0.75, [1.1 + 0.8, 0.0])          # large start: impacting branch
+    assert hb_amps[0] == pytest.approx(low_ref, rel=5e-3)
+    assert hb_amps[2] == pytest.approx(high_ref, rel=5e-3)
+    assert high_ref > 3 * low_ref
+    assert low_ref == pytest.approx(abs(0.03 / (1 - 0.75**2 + 0.075j)), rel=1e-6)
+
+
+def test_python_driver_matches_and_compiles_once(branch):
+    problem, settings = branch["problem"], branch["settings"]
+    b1 = C.continue_branch(branch["param"], branch["y0"], 0.5, 0.6, settings, max_points=50)
+    n_before = C._arclength_step_jit._cache_size()
+    b2 = C.continue_branch(branch["param"], _hb.solve_hb(problem, 0.55).y, 0.55, 0.62, settings,
+                           max_points=50)
+    assert C._arclength_step_jit._cache_size() == n_before  # same shapes: no recompilation
+    assert b1.stop == "reached_end" and b2.stop == "reached_end"
+    # on the contact branch the response is linear: first harmonic 0.03 / (1 - w^2 + 0.1 i w)
+    w = b1.omega[-1]
+    X1 = b1.y[-1].reshape(2 * K + 1, 1)[1:3, 0] * float(problem.x_scale[0])
+    assert np.hypot(*X1) == pytest.approx(abs(0.03 / (1 - w**2 + 0.1j * w)), rel=1e-9)
+
+
+def test_stops_with_reason_and_keeps_points(branch):
+    settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02)
+    b = C.continue_branch(branch["param"], branch["y0"], 0.5, 1.5, settings, max_points=5)
+    assert b.stop == "max_points" and len(b.lam) == 5 and np.all(np.isfinite(b.y))
