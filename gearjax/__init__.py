@@ -14,8 +14,33 @@ from ._mesh import (
 )
 from ._modal import ModalResult as ModalResult, generalized_eigvals as generalized_eigvals, modes as modes
 from ._paths import get_path as get_path, set_path as set_path, continuous_paths as continuous_paths
+from ._responses import (
+    MeshResponses as MeshResponses,
+    mesh_responses as mesh_responses,
+    mesh_time_history as mesh_time_history,
+    responses_from_samples as responses_from_samples,
+    static_mesh_forces as static_mesh_forces,
+)
+from ._results import (
+    load_results as load_results,
+    mesh_coordinates as mesh_coordinates,
+    points_json as points_json,
+    results_frame as results_frame,
+    save_results as save_results,
+    sweep_dataset as sweep_dataset,
+)
+from ._stability import floquet_multipliers as floquet_multipliers, hill_multipliers as hill_multipliers, Stability as Stability, stability as stability
 from ._static import StaticLoads as StaticLoads, static_deflection as static_deflection, static_loads as static_loads
 from ._system import System as System, system_from_matrices as system_from_matrices
+from ._time_domain import (
+    TimeDomain as TimeDomain,
+    Trajectory as Trajectory,
+    contact_state as contact_state,
+    hb_initial_state as hb_initial_state,
+    simulate as simulate,
+    simulate_points as simulate_points,
+    simulate_sweep as simulate_sweep,
+)
 from ._toml_io import (
     bundled_example_path as bundled_example_path,
     dumps_train as dumps_train,

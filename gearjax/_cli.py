@@ -1,4 +1,4 @@
-"""The ``gearjax`` command line (interface.md): info, modes, calibrate.
+"""The ``gearjax`` command line (interface.md): info, modes, calibrate, sweep.
 
 Exit codes: 0 finished; 2 bad input or usage (one line on stderr, no traceback);
 3 finished but nothing converged. ``--json`` prints one JSON object on stdout and
@@ -13,6 +13,8 @@ import math
 import sys
 import warnings
 from fractions import Fraction
+
+import numpy as np
 
 from ._errors import GeometryWarning, TrainError, fail
 
@@ -67,6 +69,20 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--free", nargs="+", required=True, metavar="PATH",
                    help="TOML paths to fit, e.g. 1.inertia.sun 2.planet_mass")
     c.add_argument("--out-train", metavar="FILE.toml", help="write the calibrated train")
+    c = command("sweep", _sweep_cmd, "frequency response by harmonic balance and continuation")
+    c.add_argument("--from", dest="from_hz", type=float, default=2000.0, metavar="HZ",
+                   help="start, reference-stage mesh frequency (Hz); direction = order")
+    c.add_argument("--to", dest="to_hz", type=float, default=15000.0, metavar="HZ")
+    c.add_argument("--stage", help="reference stage id (default: first turning stage)")
+    c.add_argument("--linear", action="store_true", help="no backlash")
+    c.add_argument("--harmonics", type=int, metavar="K",
+                   help="solution harmonics (default: frequency-dependent)")
+    c.add_argument("--eta", type=int, default=1, help="sub-harmonic index")
+    c.add_argument("--max-step", type=float, metavar="HZ", help="largest frequency step")
+    c.add_argument("--points", type=int, default=300, help="points of a linear sweep")
+    c.add_argument("--out", metavar="FILE.nc|.csv", help="write the results")
+    c.add_argument("--plot", metavar="FIG", help="write the RMS mesh forces")
+    c.add_argument("--resume", action="store_true", help=argparse.SUPPRESS)
     return p
 
 
@@ -232,6 +248,61 @@ def _calibrate(args, train, notes) -> int:
         print(f"{p:>20} {result.initial[p]:>12.5g} {result.fitted[p]:>12.5g}{flag}")
     if args.out_train:
         print(f"calibrated train written to {args.out_train}")
+    return code
+
+
+# ---------------------------------------------------------------------------- sweep
+
+
+def _sweep_cmd(args, train, notes) -> int:
+    from ._results import save_results
+    from ._sweep import progress_printer, summary_json, sweep
+
+    if args.resume:
+        raise fail("command line", "--resume", True,
+                   "resuming a sweep is not available yet (journaling lands with issue 6)")
+    if args.out and not args.out.endswith((".nc", ".csv")):
+        raise fail("command line", "--out", args.out, "must end in .nc or .csv")
+    g = train.gear(args.gear)
+    result = sweep(train, g.name, args.from_hz, args.to_hz, stage=args.stage,
+                   linear=args.linear, harmonics=args.harmonics, eta=args.eta,
+                   max_step_hz=args.max_step, points=args.points,
+                   progress=progress_printer(sys.stderr))
+    ds = result.dataset
+    if args.out:
+        save_results(ds, args.out)
+    if args.plot:
+        from ._plot import plot_sweep
+
+        kind = "linear" if args.linear else "backlash"
+        plot_sweep(ds, args.plot, title=f"{train.name}: gear {g.name}, {kind}")
+    out = summary_json(result)
+    out["warnings"] = notes
+    converged = bool(np.any(ds["converged"].values))
+    code = EXIT_OK if converged else EXIT_NOT_CONVERGED
+    if args.json:
+        _emit(out)
+        return code
+    rms = ds["rms_force"].values
+    stable = ds["stable"].values
+    print(f"sweep of gear {g.name!r}: {ds.sizes['point']} points, "
+          f"{'linear' if args.linear else 'with backlash'}, stop: {result.stop}, "
+          f"{result.seconds:.1f} s")
+    print("segments (Hz, harmonics): " + ", ".join(
+        f"{a:.0f}-{b:.0f} K={k}" for a, b, k in result.segments))
+    if result.folds_hz:
+        print("folds at " + ", ".join(f"{f:.1f}" for f in result.folds_hz) + " Hz")
+    print(f"unstable points: {int(np.sum(stable == 0))}")
+    for stage in dict.fromkeys(ds["stage"].values.tolist()):
+        cols = ds["stage"].values == stage
+        peak = np.nanargmax(np.nanmax(rms[:, cols], axis=1))
+        print(f"stage {stage}: largest RMS mesh force {np.nanmax(rms[:, cols]):.1f} N at "
+              f"{float(ds['mesh_frequency_hz'][peak]):.1f} Hz; largest separation share "
+              f"{np.nanmax(ds['separation'].values[:, cols]):.3f}")
+    if args.out:
+        print(f"results written to {args.out}")
+    if args.plot:
+        print(f"figure written to {args.plot}")
     return code
 
 

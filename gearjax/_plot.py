@@ -45,3 +45,46 @@ def plot_mode_shapes(result: ModalResult, path: str, title: str = "", classes=("
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def plot_sweep(ds, path: str, what: str = "rms", title: str = ""):
+    """Response of every stage's meshes against reference-stage mesh frequency.
+
+    ``what``: ``rms`` (RMS alternating force, N), ``dlf``, ``separation`` (share of the
+    period) or ``torque`` (mean transmitted torque, N m). One panel per stage and mesh
+    side, the planets' curves overlaid; stable solid, unstable dashed, unknown dotted.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    var, label = {"rms": ("rms_force", "RMS mesh force (N)"), "dlf": ("dlf", "dynamic load factor"),
+                  "separation": ("separation", "share of period in separation"),
+                  "torque": ("mean_torque", "mean transmitted torque (N m)")}[what]
+    f = np.asarray(ds["mesh_frequency_hz"]) / 1e3
+    stable = np.asarray(ds["stable"]) if "stable" in ds else np.full(f.shape, -1)
+    stages = list(dict.fromkeys(np.asarray(ds["stage"]).tolist()))
+    fig, axes = plt.subplots(len(stages), 2, figsize=(10, 3.2 * len(stages)), squeeze=False,
+                             sharex=True)
+    for r, stage in enumerate(stages):
+        for c, side in enumerate(("sun", "ring")):
+            ax = axes[r, c]
+            sel = (np.asarray(ds["stage"]) == stage) & (np.asarray(ds["side"]) == side)
+            for j in np.where(sel)[0]:
+                y = np.asarray(ds[var])[:, j]
+                for flag, style in ((1, "-"), (0, "--"), (-1, ":")):
+                    yy = np.where(stable == flag, y, np.nan)
+                    ax.plot(f, yy, style, lw=1.0, color=f"C{j % 10}",
+                            label=(f"planet {int(ds['planet'][j])}"
+                                   if flag == 1 and r == 0 and c == 0 else None))
+            ax.set_title(f"stage {stage}, {side}-planet meshes", fontsize=9)
+            ax.set_ylabel(label, fontsize=8)
+            ax.grid(alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(title or "frequency response (solid stable, dashed unstable)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

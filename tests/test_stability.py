@@ -1,0 +1,317 @@
+"""Stability of periodic solutions: Floquet multipliers (Magnus exponentials), Hill's method,
+rigid-mode exclusion, bifurcation kinds. References are independent: analytic eigenvalues,
+scipy's solve_ivp on the variational equations, a shooting solution of the non-linear flow."""
+
+import time
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.linalg
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq, linear_sum_assignment
+
+import gearjax as gj
+from gearjax import _aft, _hb, _stability
+
+K_OSC = 32  # one harmonic count for every oscillator case: one compilation each
+SETTINGS = _hb.HarmonicBalance(n_harmonics=K_OSC)
+
+_solve = jax.jit(_hb.solve_hb)
+
+
+def solve(problem, omega, y0=None):
+    """HB solution, always with an explicit start (one compilation per system shape)."""
+    y0 = _hb.linear_guess(problem, omega) if y0 is None else y0
+    return _solve(problem, float(omega), y0)
+
+
+stability = jax.jit(gj.stability, static_argnames="n_steps")
+floquet = jax.jit(gj.floquet_multipliers, static_argnames="n_steps")
+hill = jax.jit(gj.hill_multipliers)
+monodromy = jax.jit(_stability.monodromy, static_argnames="n_steps")
+
+
+def oscillator(*, c=0.1, clearance=0.0, eps=0.0, mean=0.1, amp=0.03, mesh_damping=0.0,
+               contact_damping=False):
+    """x'' + c x' + (1 + eps cos(Omega t)) g(x) + c_m x' = mean + amp cos(Omega t)."""
+    return gj.system_from_matrices(
+        [[1.0]], [[c]], [[0.0]], [[1.0]], [1.0], backlash=[clearance], damping=[mesh_damping],
+        k_cos=[[eps]], mesh_mu=[1], f_mean=[mean], f_cos=[[amp]], f_sin=[[0.0]],
+        forcing_mu=[1], contact_damping=contact_damping)
+
+
+def matched_error(a, b):
+    """Largest distance between two multiplier sets after optimal pairing."""
+    a, b = np.asarray(a), np.asarray(b)
+    D = np.abs(a[:, None] - b[None, :])
+    rows, cols = linear_sum_assignment(D)
+    return float(D[rows, cols].max())
+
+
+def orbit(X, omega):
+    """x(t), x'(t) of a one-DOF HB solution, straight from its coefficients."""
+    X = np.asarray(X)[:, 0]
+    k = np.arange(1, (X.size - 1) // 2 + 1)
+    x = lambda t: X[0] + X[1::2] @ np.cos(k * omega * t) + X[2::2] @ np.sin(k * omega * t)
+    v = lambda t: omega * (X[2::2] * k) @ np.cos(k * omega * t) - omega * (
+        X[1::2] * k) @ np.sin(k * omega * t)
+    return x, v
+
+
+# ------------------------------------------------------------------- linear, Mathieu
+
+
+@pytest.mark.parametrize("omega", [0.7, 1.3])
+def test_linear_oscillator_multipliers_are_exp_lambda_T(omega):
+    """x'' + 0.1 x' + x = cos(Omega t): mu = exp(lambda T), lambda roots of s^2 + 0.1 s + 1."""
+    problem = _hb.hb_problem(oscillator(mean=0.0, amp=1.0), SETTINGS)
+    sol = solve(problem, omega)
+    exact = np.exp(np.roots([1.0, 0.1, 1.0]) * 2 * np.pi / omega)
+    st = stability(problem, sol.X, omega)
+    assert matched_error(st.multipliers, exact) < 1e-12
+    assert matched_error(hill(problem, sol.X, omega), exact) < 1e-12
+    assert bool(st.stable) and not np.any(st.excluded)
+    np.testing.assert_allclose(float(st.max_abs), np.exp(-0.05 * 2 * np.pi / omega), rtol=1e-12)
+
+
+def mathieu_monodromy(eps, c, omega):
+    """Independent reference: solve_ivp on the variational equations of
+    x'' + c x' + (1 + eps cos(Omega t)) x = 0 over one period."""
+    def rhs(t, y):
+        A = np.array([[0.0, 1.0], [-(1 + eps * np.cos(omega * t)), -c]])
+        return (A @ y.reshape(2, 2)).ravel()
+
+    r = solve_ivp(rhs, (0, 2 * np.pi / omega), np.eye(2).ravel(), method="DOP853", rtol=1e-11,
+                  atol=1e-13)
+    return r.y[:, -1].reshape(2, 2)
+
+
+@pytest.mark.parametrize("omega, unstable", [(2.0, True), (1.9, True), (2.6, False), (1.0, False)])
+def test_mathieu_tongue_floquet_hill_and_solve_ivp(omega, unstable):
+    """Parametric resonance of x'' + 0.05 x' + (1 + 0.4 cos(Omega t)) x = small forcing: the
+    first tongue (Omega near 2, eps = 0.4 > 2c) is unstable, outside it stable."""
+    eps, c = 0.4, 0.05
+    problem = _hb.hb_problem(oscillator(c=c, eps=eps, mean=0.0, amp=0.01), SETTINGS)
+    sol = solve(problem, omega)
+    assert int(sol.result) == _hb.CONVERGED
+    ref = mathieu_monodromy(eps, c, omega)
+    np.testing.assert_allclose(monodromy(problem, sol.X, omega), ref, atol=1e-9)
+    st = stability(problem, sol.X, omega)
+    assert matched_error(st.multipliers, np.linalg.eigvals(ref)) < 1e-9
+    assert matched_error(hill(problem, sol.X, omega), st.multipliers) < 1e-6
+    assert bool(st.stable) == (not unstable)
+    assert (float(st.max_abs) > 1.0) == unstable
+
+
+def test_bifurcation_kind():
+    eps, c = 0.4, 0.05
+    problem = _hb.hb_problem(oscillator(c=c, eps=eps, mean=0.0, amp=0.01), SETTINGS)
+    points = {}
+    for omega in (2.6, 2.0):
+        sol = solve(problem, omega)
+        points[omega] = stability(problem, sol.X, omega)
+    # entering the Mathieu tongue: a real multiplier leaves through -1
+    assert _stability.bifurcation_kind(points[2.6], points[2.0]) == "period_doubling"
+    assert _stability.bifurcation_kind(points[2.0], points[2.6]) == "period_doubling"
+    assert _stability.bifurcation_kind(points[2.6], points[2.6]) is None
+    assert _stability.bifurcation_kind([0.5, 0.98], [0.5, 1.03]) == "fold"
+    assert _stability.bifurcation_kind([0.3, -0.97], [0.3, -1.02]) == "period_doubling"
+    pair = np.exp(1j * np.array([1.0, -1.0]))
+    kind = _stability.bifurcation_kind(np.r_[0.1, 0.98 * pair], np.r_[0.1, 1.02 * pair])
+    assert kind == "neimark_sacker"
+    assert _stability.bifurcation_kind([0.5, 1.5], [0.4, 1.6]) is None
+
+
+# ---------------------------------------------------------------- clearance oscillator
+
+
+def test_clearance_oscillator_contact_branch_is_stable():
+    """At Omega = 0.5 the linear solution never leaves contact: mu = exp(lambda T) exactly."""
+    omega = 0.5
+    problem = _hb.hb_problem(oscillator(clearance=1.0), SETTINGS)
+    sol = solve(problem, omega)
+    x = _aft.synthesis(sol.X, 256)[:, 0]
+    assert float(x.min()) > 1.0  # always in contact
+    st = stability(problem, sol.X, omega)
+    exact = np.exp(np.roots([1.0, 0.1, 1.0]) * 2 * np.pi / omega)
+    assert matched_error(st.multipliers, exact) < 1e-12
+    assert matched_error(hill(problem, sol.X, omega), exact) < 1e-12
+    assert bool(st.stable)
+
+
+def impacting_solution(system, omega=0.75):
+    problem = _hb.hb_problem(system, SETTINGS)
+    y0 = jnp.zeros(problem.size).at[0].set(1.1 / problem.x_scale[0]).at[1].set(
+        -1.0 / problem.x_scale[0])  # a large-amplitude start: the resonant, impacting branch
+    sol = solve(problem, omega, y0)
+    assert int(sol.result) == _hb.CONVERGED
+    x = _aft.synthesis(sol.X, 512)[:, 0]
+    assert float(x.min()) < 0.9 < 1.1 < float(x.max())  # it separates once per period
+    return problem, sol
+
+
+def variational_reference(X, omega, *, c, contact_damping):
+    """Monodromy of the variational equations along the HB orbit: solve_ivp between the
+    instants where |x| = 1 (brentq on the Fourier series), with the textbook saltation
+    matrix I + (f+ - f-) n^T / (n . f-) where the vector field jumps (contact damping)."""
+    x, v = orbit(X, omega)
+    T = 2 * np.pi / omega
+    grid = np.linspace(0, T, 2001)
+    gap = np.array([abs(x(t)) - 1.0 for t in grid])
+    cuts = [brentq(lambda t: abs(x(t)) - 1.0, grid[i], grid[i + 1], xtol=1e-15)
+            for i in range(len(grid) - 1) if gap[i] * gap[i + 1] < 0]
+
+    def field(t, state, touching):  # the non-linear vector field with a given contact state
+        xx, vv = state
+        g = xx - np.sign(xx) if touching else 0.0
+        damping = c * vv if (touching or not contact_damping) else 0.0
+        return np.array([vv, 0.1 + 0.03 * np.cos(omega * t) - g - damping])
+
+    Y = np.eye(2)
+    edges = [0.0, *cuts, T]
+    for a, b in zip(edges[:-1], edges[1:]):
+        touching = abs(x(0.5 * (a + b))) > 1.0
+        cc = c if (touching or not contact_damping) else 0.0
+        A = np.array([[0.0, 1.0], [-float(touching), -cc]])
+        r = solve_ivp(lambda t, y: (A @ y.reshape(2, 2)).ravel(), (a, b), Y.ravel(),
+                      method="DOP853", rtol=1e-12, atol=1e-14)
+        Y = r.y[:, -1].reshape(2, 2)
+        if b < T:
+            state = np.array([x(b), v(b)])
+            f_minus, f_plus = field(b, state, touching), field(b, state, not touching)
+            normal = np.array([np.sign(state[0]), 0.0])
+            Y = (np.eye(2) + np.outer(f_plus - f_minus, normal) / (normal @ f_minus)) @ Y
+    return Y, len(cuts)
+
+
+def shooting_reference(X, omega, c=0.1):
+    """Periodic orbit of the non-linear flow itself (Newton on x(T) - x(0), solve_ivp with
+    events at |x| = 1) and its monodromy: independent of the HB truncation."""
+    T = 2 * np.pi / omega
+
+    def rhs(t, y, touching):
+        g = y[0] - np.sign(y[0]) if touching else 0.0
+        Y = y[2:].reshape(2, 2)
+        A = np.array([[0.0, 1.0], [-float(touching), -c]])
+        return np.r_[y[1], 0.1 + 0.03 * np.cos(omega * t) - c * y[1] - g, (A @ Y).ravel()]
+
+    def flow(z):
+        y, t = np.r_[z, np.eye(2).ravel()], 0.0
+        events = [lambda t, y, s: y[0] - 1.0, lambda t, y, s: y[0] + 1.0]
+        for e in events:
+            e.terminal = True
+        while t < T:
+            touching = abs(y[0]) > 1.0
+            r = solve_ivp(rhs, (t, T), y, args=(touching,), events=events, method="DOP853",
+                          rtol=1e-12, atol=1e-13)
+            y, t = r.y[:, -1].copy(), r.t[-1]
+            if r.status == 1:  # step just across the switching surface
+                y[0] = np.sign(y[0]) * (1.0 - 1e-15 if touching else 1.0 + 1e-15)
+        return y[:2], y[2:].reshape(2, 2)
+
+    x, v = orbit(X, omega)
+    z = np.array([x(0.0), v(0.0)])
+    for _ in range(4):
+        zT, Phi = flow(z)
+        z = z - np.linalg.solve(Phi - np.eye(2), zT - z)
+    return flow(z)[1]
+
+
+def test_clearance_oscillator_impacting_solution():
+    """Omega = 0.75, impacting branch: against the variational equations along the same orbit
+    (the integrator's own error, with convergence in the step count) and against the
+    monodromy of the exact periodic orbit of the non-linear flow (adds the HB truncation)."""
+    omega = 0.75
+    problem, sol = impacting_solution(oscillator(clearance=1.0))
+    ref, switches = variational_reference(sol.X, omega, c=0.1, contact_damping=False)
+    assert switches == 2
+    mu_ref = np.linalg.eigvals(ref)
+    assert _stability.floquet_steps(problem) == 1024
+    st = stability(problem, sol.X, omega)  # 1024 steps
+    coarse = floquet(problem, sol.X, omega, n_steps=256)
+    # error 2.8e-6 at 256 steps, 2.7e-8 at 1024: third order (the switching steps)
+    assert matched_error(st.multipliers, mu_ref) < 1e-7
+    assert matched_error(st.multipliers, mu_ref) < matched_error(coarse, mu_ref) / 30
+    assert bool(st.stable) and float(st.max_abs) == pytest.approx(0.6578, abs=1e-3)
+    # the true periodic orbit of the non-linear system: HB (K = 32) error included
+    assert matched_error(st.multipliers, np.linalg.eigvals(shooting_reference(sol.X, omega))) < 1e-4
+    # Hill with backlash: the switching instants are only resolved by the AFT time grid
+    assert matched_error(hill(problem, sol.X, omega), mu_ref) < 3e-2
+
+
+def test_contact_damping_is_handled_by_the_momentum_variable():
+    """Damping only in contact: the force jumps at contact changes (saltation matrices in the
+    reference); Floquet handles it, Hill refuses it with a clear message."""
+    omega = 0.75
+    problem, sol = impacting_solution(oscillator(c=0.0, clearance=1.0, mesh_damping=0.1,
+                                                 contact_damping=True))
+    ref, switches = variational_reference(sol.X, omega, c=0.1, contact_damping=True)
+    assert switches == 2
+    mu = floquet(problem, sol.X, omega)
+    assert matched_error(mu, np.linalg.eigvals(ref)) < 1e-7
+    with pytest.raises(ValueError, match="hill_multipliers does not support contact_damping"):
+        gj.hill_multipliers(problem, sol.X, omega)
+
+
+def test_vmap_over_points_matches_single_points():
+    problem = _hb.hb_problem(oscillator(clearance=1.0), SETTINGS)
+    omegas = jnp.array([0.4, 0.5, 0.6, 1.6])
+    X = jnp.stack([solve(problem, w).X for w in omegas])
+    batch = jax.jit(jax.vmap(lambda X, w: gj.stability(problem, X, w)))(X, omegas)
+    assert batch.multipliers.shape == (4, 2) and batch.stable.shape == (4,)
+    for i, w in enumerate(omegas):
+        single = stability(problem, X[i], float(w))
+        np.testing.assert_allclose(batch.multipliers[i], single.multipliers, atol=1e-13)
+        assert bool(batch.stable[i]) == bool(single.stable)
+
+
+# ------------------------------------------------------------------------ paper gear
+
+
+@pytest.fixture(scope="module")
+def paper():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gj.GeometryWarning)
+        return gj.assemble(gj.load_train())
+
+
+def test_paper_gear_at_3khz(paper):
+    """K = 16 at a stage-1 mesh frequency of 3 kHz: 28 multipliers, the undamped near-rigid
+    pair (1e2 N m/rad housing springs) recognised and excluded, the solution stable."""
+    problem = _hb.hb_problem(paper, _hb.HarmonicBalance(n_harmonics=16))
+    omega = 2 * np.pi * 3000 / 7
+    sol = jax.jit(_hb.solve_hb)(problem, omega)
+    assert int(sol.result) == _hb.CONVERGED
+    st = jax.block_until_ready(stability(problem, sol.X, omega))  # compile
+    times = []
+    for _ in range(3):
+        start = time.perf_counter()
+        st = jax.block_until_ready(stability(problem, sol.X, omega))
+        times.append(time.perf_counter() - start)
+    print(f"\npaper stability at 3 kHz, {_stability.floquet_steps(problem)} steps: "
+          f"{1e3 * min(times):.0f} ms per point after compile")
+    assert min(times) < 1.0
+    mu = np.asarray(st.multipliers)
+    assert mu.shape == (28,)
+    excluded = np.asarray(st.excluded)
+    assert excluded.sum() == 2
+    pair = mu[excluded]
+    assert np.allclose(np.abs(pair), 1.0, atol=1e-6) and np.isclose(pair[0], np.conj(pair[1]))
+    assert np.all(np.asarray(st.mesh_strain)[excluded] < _stability.RIGID_STRAIN)
+    assert np.all(np.asarray(st.mesh_strain)[~excluded] > 0.1)
+    # the pair turns by the near-rigid frequency (41.2 Hz) per period (T = 7 / 3000 s)
+    lam = scipy.linalg.eigh(np.asarray(paper.mean_stiffness()), np.asarray(paper.M),
+                            eigvals_only=True)
+    f_rigid = np.sqrt(lam.min()) / (2 * np.pi)
+    assert abs(np.angle(pair).max() - 2 * np.pi * f_rigid * 7 / 3000) < 1e-3
+    assert bool(st.stable) and float(st.max_abs) < 0.5
+
+
+def test_step_count_must_be_a_power_of_two():
+    problem = _hb.hb_problem(oscillator(clearance=1.0), SETTINGS)
+    X = jnp.zeros(problem.shape)
+    with pytest.raises(ValueError, match="n_steps must be a power of two >= 2"):
+        gj.floquet_multipliers(problem, X, 0.5, n_steps=1000)

@@ -1,0 +1,77 @@
+"""The gear-train sweep surface: refusals, harmonics rule, a short linear sweep end to end."""
+
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+import gearjax as gj
+from gearjax import _sweep
+from gearjax._cli import main
+
+
+@pytest.fixture(scope="module")
+def train():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gj.GeometryWarning)
+        return gj.load_train()
+
+
+def test_gear_where_no_mesh_turns_is_refused(train):
+    with pytest.raises(gj.TrainError, match="no mesh turns"):
+        _sweep.sweep(train, "third", 2000, 3000)
+
+
+@pytest.mark.parametrize("gear, stage", [("second", "1"), ("fourth", "2"), ("reverse", "2")])
+def test_unloaded_stage_with_backlash_needs_drag(train, gear, stage):
+    with pytest.raises(gj.TrainError) as e:
+        _sweep.sweep(train, gear, 2000, 3000)
+    msg = str(e.value)
+    assert f"gears.{gear}.drag_torque = 0.0" in msg and f"stage {stage!r}" in msg
+    assert "\n" not in msg
+
+
+def test_bad_stage_and_frequency_are_refused(train):
+    with pytest.raises(gj.TrainError, match="--stage = '7': no such stage"):
+        _sweep.sweep(train, "first", 2000, 3000, stage="7")
+    with pytest.raises(gj.TrainError, match="--from = -1"):
+        _sweep.sweep(train, "first", -1, 3000)
+
+
+def test_harmonics_rule_and_segments():
+    # paper first gear, mu_ref = 7: base = f / 7
+    assert _sweep.harmonics_rule(2000 / 7, 32) == 64
+    assert _sweep.harmonics_rule(15000 / 7, 32) == 32
+    segs = _sweep._segments(2000, 15000, 7, 32, 1, None)
+    assert segs[0][0] == 2000 and segs[-1][1] == 15000
+    assert [k for *_, k in segs] == sorted([k for *_, k in segs], reverse=True)
+    assert len(segs) <= 3
+    down = _sweep._segments(15000, 2000, 7, 32, 1, None)
+    assert down[0][0] == 15000 and down[-1][1] == 2000
+
+
+def test_linear_sweep_json_and_files(capsys, tmp_path):
+    nc, fig = tmp_path / "lin.nc", tmp_path / "lin.png"
+    code = main(["sweep", "--linear", "--from", "5000", "--to", "5400", "--points", "3",
+                 "--harmonics", "16", "--json", "--out", str(nc), "--plot", str(fig)])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and out["stop"] == "reached_end" and len(out["points"]) == 3
+    p = out["points"][0]
+    assert {"mesh_frequency_hz", "stage_mesh_frequency_hz", "input_rpm", "result", "converged",
+            "stable", "meshes"} <= set(p)
+    assert p["mesh_frequency_hz"] == pytest.approx(5000)
+    assert p["stage_mesh_frequency_hz"][1] == pytest.approx(5000 * 8 / 7)
+    assert p["input_rpm"] == pytest.approx(5000 / 226.4705882 * 1000, rel=1e-6)
+    mesh = {m["name"]: m for m in p["meshes"]}
+    assert set(mesh) >= {"1.sp1", "2.rp4"}
+    # linear: no separation, and the mean transmitted torque is the static one (the 1e2
+    # housing springs are linear too, so HB's mean row is the static equation)
+    assert mesh["1.sp1"]["separation"] == 0.0
+    assert mesh["1.sp1"]["mean_force"] == pytest.approx(8942.2, rel=1e-4)
+    ds = gj.load_results(nc)
+    assert ds.sizes["point"] == 3 and ds.sizes["mesh"] == 16
+    assert fig.stat().st_size > 10_000
+    assert all(math.isfinite(m["rms_force"]) for m in p["meshes"])
+    assert np.all(ds["converged"].values)
