@@ -30,6 +30,14 @@ from ._results import (
     sweep_dataset as sweep_dataset,
 )
 from ._stability import floquet_multipliers as floquet_multipliers, hill_multipliers as hill_multipliers, Stability as Stability, stability as stability
+from ._simulate import simulate_gear as simulate_gear
+from ._sweep import SweepResult as SweepResult, sweep as sweep
+from ._sensitivity import (
+    BandSensitivity as BandSensitivity,
+    Sensitivity as Sensitivity,
+    band_sensitivity as band_sensitivity,
+    sensitivity as sensitivity,
+)
 from ._static import StaticLoads as StaticLoads, static_deflection as static_deflection, static_loads as static_loads
 from ._system import System as System, system_from_matrices as system_from_matrices
 from ._time_domain import (
@@ -56,5 +64,6 @@ from ._train import (
     Train as Train,
 )
 from ._validate import geometry_warnings as geometry_warnings, validate_train as validate_train
+from ._verify import VerifyResult as VerifyResult, verify_gear as verify_gear
 
 __version__ = "0.1.0"

@@ -1,4 +1,5 @@
-"""The ``gearjax`` command line (interface.md): info, modes, calibrate, sweep.
+"""The ``gearjax`` command line (interface.md): info, modes, calibrate, sweep, simulate,
+verify, sensitivity.
 
 Exit codes: 0 finished; 2 bad input or usage (one line on stderr, no traceback);
 3 finished but nothing converged. ``--json`` prints one JSON object on stdout and
@@ -78,12 +79,59 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--harmonics", type=int, metavar="K",
                    help="solution harmonics (default: frequency-dependent)")
     c.add_argument("--eta", type=int, default=1, help="sub-harmonic index")
-    c.add_argument("--max-step", type=float, metavar="HZ", help="largest frequency step")
+    c.add_argument("--max-step", type=float, metavar="HZ",
+                   help="largest frequency step of the continuation predictor")
     c.add_argument("--points", type=int, default=300, help="points of a linear sweep")
+    c.add_argument("--max-points", type=int, default=3000,
+                   help="cap on the points of a continuation")
+    c.add_argument("--smoothing", type=float, default=0.0, metavar="REL",
+                   help="round the backlash corners over REL x backlash (default 0: exact)")
     c.add_argument("--out", metavar="FILE.nc|.csv", help="write the results")
     c.add_argument("--plot", metavar="FIG", help="write the RMS mesh forces")
     c.add_argument("--resume", action="store_true", help=argparse.SUPPRESS)
+    c = command("simulate", _simulate_cmd, "steady states by time integration")
+    _point_flags(c)
+    c.add_argument("--out", metavar="FILE.nc|.csv", help="write the results")
+    c.add_argument("--plot", metavar="FIG", help="write the RMS mesh forces")
+    c = command("verify", _verify_cmd,
+                "harmonic balance against time integration at the same points")
+    _point_flags(c)
+    c.add_argument("--harmonics", type=int, metavar="K",
+                   help="harmonic-balance harmonics (default: frequency-dependent)")
+    c.add_argument("--tol-linear", type=float, default=0.01, metavar="REL",
+                   help="tolerance on the relative RMS difference without backlash")
+    c.add_argument("--tol-nonlinear", type=float, default=0.02, metavar="REL",
+                   help="tolerance on the relative RMS difference with backlash")
+    c.add_argument("--plot", metavar="FIG",
+                   help="write integration points over the harmonic-balance curve")
+    c.add_argument("--curve", metavar="RESULTS.nc",
+                   help="a saved sweep to draw as the harmonic-balance curve in --plot")
+    c = command("sensitivity", _sensitivity_cmd,
+                "derivatives of a mesh response at one frequency w.r.t. train parameters")
+    c.add_argument("--at", type=float, required=True, metavar="HZ",
+                   help="reference-stage mesh frequency (Hz)")
+    c.add_argument("--response", choices=("rms", "max", "dlf"), default="rms",
+                   help="RMS alternating force, peak force or dynamic load factor")
+    c.add_argument("--mesh", metavar="NAME", help="mesh such as 1.sp1 (default: largest)")
+    c.add_argument("--vary", nargs="+", metavar="PATH",
+                   help="TOML paths (default: every continuous parameter)")
+    c.add_argument("--stage", help="reference stage id (default: first turning stage)")
+    c.add_argument("--linear", action="store_true", help="no backlash")
+    c.add_argument("--harmonics", type=int, metavar="K",
+                   help="solution harmonics (default: frequency-dependent)")
     return p
+
+
+def _point_flags(c: argparse.ArgumentParser) -> None:
+    """The frequency flags of simulate and verify."""
+    c.add_argument("--at", type=float, nargs="+", metavar="HZ",
+                   help="independent points, reference-stage mesh frequency (Hz)")
+    c.add_argument("--from", dest="from_hz", type=float, metavar="HZ",
+                   help="sweep start (Hz); each point continues from the previous")
+    c.add_argument("--to", dest="to_hz", type=float, metavar="HZ", help="sweep end (Hz)")
+    c.add_argument("--points", type=int, metavar="N", help="sweep points (default 20)")
+    c.add_argument("--stage", help="reference stage id (default: first turning stage)")
+    c.add_argument("--linear", action="store_true", help="no backlash")
 
 
 # ----------------------------------------------------------------------------- info
@@ -267,6 +315,7 @@ def _sweep_cmd(args, train, notes) -> int:
     result = sweep(train, g.name, args.from_hz, args.to_hz, stage=args.stage,
                    linear=args.linear, harmonics=args.harmonics, eta=args.eta,
                    max_step_hz=args.max_step, points=args.points,
+                   max_points=args.max_points, smoothing=args.smoothing,
                    progress=progress_printer(sys.stderr))
     ds = result.dataset
     if args.out:
@@ -293,6 +342,8 @@ def _sweep_cmd(args, train, notes) -> int:
     if result.folds_hz:
         print("folds at " + ", ".join(f"{f:.1f}" for f in result.folds_hz) + " Hz")
     print(f"unstable points: {int(np.sum(stable == 0))}")
+    for b in out["bifurcations"]:
+        print(f"  stability changes near {b['mesh_frequency_hz']:.1f} Hz: {b['kind']}")
     for stage in dict.fromkeys(ds["stage"].values.tolist()):
         cols = ds["stage"].values == stage
         peak = np.nanargmax(np.nanmax(rms[:, cols], axis=1))
@@ -303,6 +354,147 @@ def _sweep_cmd(args, train, notes) -> int:
         print(f"results written to {args.out}")
     if args.plot:
         print(f"figure written to {args.plot}")
+    return code
+
+
+# ------------------------------------------------------------------ simulate, verify
+
+
+def _stderr(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def _simulate_cmd(args, train, notes) -> int:
+    from ._results import points_json, save_results
+    from ._simulate import simulate_gear
+
+    if args.out and not args.out.endswith((".nc", ".csv")):
+        raise fail("command line", "--out", args.out, "must end in .nc or .csv")
+    g = train.gear(args.gear)
+    ds = simulate_gear(train, g.name, args.at, from_hz=args.from_hz, to_hz=args.to_hz,
+                       points=args.points, stage=args.stage, linear=args.linear,
+                       progress=_stderr)
+    if args.out:
+        save_results(ds, args.out)
+    if args.plot:
+        from ._plot import plot_points
+
+        kind = "linear" if args.linear else "backlash"
+        plot_points(ds, args.plot, title=f"{train.name}: gear {g.name}, {kind}, time integration")
+    converged = bool(np.any(ds["converged"].values))
+    code = EXIT_OK if converged else EXIT_NOT_CONVERGED
+    out = {"gear": g.name, "reference_stage": ds.attrs["reference_stage"],
+           "mode": ds.attrs["mode"], "seconds": ds.attrs["seconds"],
+           "points": points_json(ds), "solver": json.loads(ds.attrs["solver"]),
+           "warnings": notes}
+    for p, periods, steps in zip(out["points"], ds["periods"].values, ds["num_steps"].values):
+        p["periods"], p["num_steps"] = int(periods), int(steps)
+    if args.json:
+        _emit(out)
+        return code
+    rms = ds["rms_force"].values
+    print(f"simulation of gear {g.name!r}: {ds.sizes['point']} points "
+          f"({ds.attrs['mode']}), {'linear' if args.linear else 'with backlash'}, "
+          f"{ds.attrs['seconds']:.1f} s")
+    stages = list(dict.fromkeys(ds["stage"].values.tolist()))
+    print(f"{'Hz':>9} {'result':>13} {'period':>6} {'periods':>7} "
+          + " ".join(f"{'max RMS ' + s + ' (N)':>14}" for s in stages))
+    for k, p in enumerate(out["points"]):
+        cols = [np.nanmax(rms[k, ds["stage"].values == s]) if p["converged"] or
+                p["result"] == "not_periodic" else math.nan for s in stages]
+        print(f"{p['mesh_frequency_hz']:>9.1f} {p['result']:>13} {p['period']:>6.0f} "
+              f"{p['periods']:>7} " + " ".join(f"{c:>14.1f}" for c in cols))
+    if args.out:
+        print(f"results written to {args.out}")
+    if args.plot:
+        print(f"figure written to {args.plot}")
+    return code
+
+
+def _verify_cmd(args, train, notes) -> int:
+    from ._verify import verify_gear, verify_json
+
+    g = train.gear(args.gear)
+    curve = None
+    if args.curve:
+        from ._results import load_results
+
+        try:
+            curve = load_results(args.curve)
+        except (OSError, ValueError) as e:
+            raise fail("command line", "--curve", args.curve, f"cannot be read: {e}") from None
+    result = verify_gear(train, g.name, args.at, from_hz=args.from_hz, to_hz=args.to_hz,
+                         points=args.points, stage=args.stage, linear=args.linear,
+                         harmonics=args.harmonics, tol_linear=args.tol_linear,
+                         tol_nonlinear=args.tol_nonlinear, progress=_stderr)
+    if args.plot:
+        from ._plot import plot_verify
+
+        kind = "linear" if args.linear else "backlash"
+        plot_verify(result.hb, result.ni, args.plot, curve=curve,
+                    title=f"{train.name}: gear {g.name}, {kind}: harmonic balance (line) and "
+                          "time integration (markers)")
+    out = verify_json(result)
+    out["warnings"] = notes
+    converged = any(p["converged"] for p in out["points"])
+    code = EXIT_OK if converged else EXIT_NOT_CONVERGED
+    if args.json:
+        _emit(out)
+        return code
+    n_ok, n = int(np.sum(result.ok)), result.ok.size
+    print(f"verification of gear {g.name!r}: {len(out['points'])} points, "
+          f"{'linear' if args.linear else 'with backlash'}, tolerance {result.tolerance:g} "
+          f"(relative to the stage's largest RMS); {n_ok} of {n} meshes ok; "
+          f"harmonic balance {result.seconds['harmonic_balance']:.1f} s, "
+          f"integration {result.seconds['integration']:.1f} s")
+    print(f"{'Hz':>9} {'K':>3} {'HB':>10} {'NI':>13} {'stable':>6} {'max rel diff':>12} "
+          f"{'worst mesh':>10} {'RMS HB (N)':>10} {'RMS NI (N)':>10}")
+    for k, p in enumerate(out["points"]):
+        rel = result.rel_diff[k]
+        if np.any(np.isfinite(rel)):
+            j = int(np.nanargmax(rel))
+            tail = (f"{rel[j]:>12.2e} {p['meshes'][j]['name']:>10} "
+                    f"{result.rms_hb[k, j]:>10.1f} {result.rms_ni[k, j]:>10.1f}")
+        else:
+            tail = f"{'-':>12} {'-':>10} {'-':>10} {'-':>10}"
+        stable = {None: "?", True: "yes", False: "no"}[p["stable"]]
+        print(f"{p['mesh_frequency_hz']:>9.1f} {p['harmonics']:>3} {p['result_hb']:>10} "
+              f"{p['result_ni']:>13} {stable:>6} " + tail + ("" if p["ok"] else "  NOT OK"))
+    if args.plot:
+        print(f"figure written to {args.plot}")
+    return code
+
+
+# ---------------------------------------------------------------------- sensitivity
+
+
+def _sensitivity_cmd(args, train, notes) -> int:
+    from ._sensitivity import sensitivity, sensitivity_json
+
+    if not (args.at > 0 and math.isfinite(args.at)):
+        raise fail("command line", "--at", args.at, "must be a positive mesh frequency in Hz")
+    result = sensitivity(train, args.gear, args.at, response=args.response, mesh=args.mesh,
+                         paths=args.vary, stage=args.stage, linear=args.linear,
+                         harmonics=args.harmonics)
+    out = sensitivity_json(result)
+    out["warnings"] = notes
+    code = EXIT_OK if result.ok else EXIT_NOT_CONVERGED
+    if not result.ok:
+        _stderr(f"gearjax: {result.message}")
+    if args.json:
+        _emit(out)
+        return code
+    kind = "linear" if args.linear else "with backlash"
+    print(f"sensitivity of the {result.response} of mesh {result.mesh} ({result.value:.6g} "
+          f"{result.unit}) at {result.mesh_frequency_hz:g} Hz, gear {result.gear!r}, {kind}, "
+          f"K = {result.harmonics}: {result.result}")
+    if not result.ok:
+        return code
+    print(f"{'path':>28} {'value':>12} {'dR/dp':>13} {'per':>8} {'(p/R) dR/dp':>12}")
+    for row in out["derivatives"]:
+        norm = "-" if row["normalised"] is None else f"{row['normalised']:+.4e}"
+        print(f"{row['path']:>28} {row['value']:>12.5g} {row['derivative']:>+13.5e} "
+              f"{row['unit']:>8} {norm:>12}")
     return code
 
 

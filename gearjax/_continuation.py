@@ -130,6 +130,20 @@ class ArcState(eqx.Module):
     piv: Array
 
 
+class _Corrector(eqx.Module):
+    """Corrector loop state: iterate, total and per-mode iteration counts, mode (chord or
+    full Newton), outcome and the previous step size (chord contraction check)."""
+
+    y: Array
+    lam: Array
+    k: Array
+    i: Array
+    full: Array
+    done: Array
+    converged: Array
+    prev: Array
+
+
 def _bordered(param: AbstractParameter, y, lam, ty, tlam):
     J = param.jacobian(y, lam)
     g = param.d_lambda(y, lam)
@@ -168,7 +182,10 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
 
     The corrector is a chord Newton with the bordered Jacobian factorised at the
     current point; the new point's Jacobian is factorised once, for its tangent and
-    for the next corrector. On success the state moves to the new point with a grown
+    for the next corrector. When the chord iterations stop contracting (the Jacobian
+    changed over the step: with exact backlash a time sample crossed a contact
+    boundary) the attempt restarts from the predictor in full Newton, refactorising
+    at every iterate, before the step is given up. On success the state moves to the new point with a grown
     or kept step; on failure it stays and the step halves (the caller stops below
     ``min_step``).
     """
@@ -176,27 +193,39 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
     y_p = state.y + h * state.ty
     lam_p = state.lam + h * state.tlam
 
+    def bordered_lu(y, lam):
+        return jax.scipy.linalg.lu_factor(_bordered(param, y, lam, state.ty, state.tlam))
+
     def cond(c):
-        _, _, k, done, _, _ = c
-        return (k < settings.max_corrector) & ~done
+        return (c.k < 2 * settings.max_corrector) & ~c.done
 
     def body(c):
-        y, lam, k, _, _, prev = c
-        r = param.residual(y, lam)
-        arc = state.ty @ (y - y_p) + state.tlam * (lam - lam_p)
-        d = jax.scipy.linalg.lu_solve((state.lu, state.piv), -jnp.concatenate([r, arc[None]]))
+        # full Newton (after the chord failed): the bordered Jacobian at the iterate
+        lu, piv = jax.lax.cond(c.full, lambda: bordered_lu(c.y, c.lam), lambda: (state.lu, state.piv))
+        r = param.residual(c.y, c.lam)
+        arc = state.ty @ (c.y - y_p) + state.tlam * (c.lam - lam_p)
+        d = jax.scipy.linalg.lu_solve((lu, piv), -jnp.concatenate([r, arc[None]]))
         size = jnp.max(jnp.abs(d))
         finite = jnp.all(jnp.isfinite(d))
-        small = size <= settings.rtol * jnp.maximum(1.0, jnp.max(jnp.abs(y)))
+        small = size <= settings.rtol * jnp.maximum(1.0, jnp.max(jnp.abs(c.y)))
         ok = finite & small & (jnp.max(jnp.abs(r)) <= jnp.sqrt(settings.rtol))
-        diverging = (k > 1) & (size > prev)  # chord iterations must contract
-        return (jnp.where(finite, y + d[:-1], y), jnp.where(finite, lam + d[-1], lam), k + 1,
-                ok | ~finite | diverging, finite & ~diverging, jnp.where(k > 0, size, jnp.inf))
+        # chord iterations must contract; when they do not (the Jacobian changed, e.g. a
+        # contact sample crossed the clearance), restart from the predictor in full Newton
+        stalled = ~c.full & (((c.i > 1) & (size > c.prev)) | (c.i + 1 >= settings.max_corrector))
+        failed = ~finite | (c.full & (c.i + 1 >= settings.max_corrector))
+        restart = stalled & ~ok & ~failed
+        y_new = jnp.where(restart, y_p, jnp.where(finite, c.y + d[:-1], c.y))
+        lam_new = jnp.where(restart, lam_p, jnp.where(finite, c.lam + d[-1], c.lam))
+        return _Corrector(y=y_new, lam=lam_new, k=c.k + 1,
+                          i=jnp.where(restart, 0, c.i + 1), full=c.full | restart,
+                          done=ok | failed, converged=ok,
+                          prev=jnp.where(restart | (c.i == 0), jnp.inf, size))
 
-    y, lam, k, done, finite, _ = jax.lax.while_loop(
-        cond, body,
-        (y_p, lam_p, jnp.asarray(0), jnp.asarray(False), jnp.asarray(True), jnp.asarray(jnp.inf)))
-    converged = done & finite
+    init = _Corrector(y=y_p, lam=lam_p, k=jnp.asarray(0), i=jnp.asarray(0),
+                      full=jnp.asarray(False), done=jnp.asarray(False),
+                      converged=jnp.asarray(False), prev=jnp.asarray(jnp.inf))
+    c = jax.lax.while_loop(cond, body, init)
+    y, lam, k, converged = c.y, c.lam, c.k, c.converged
 
     def new_tangent(_):
         return _tangent_lu(param, y, lam, state.ty, state.tlam)

@@ -22,9 +22,21 @@ from jaxtyping import Array, Float
 from ._train import Stage
 
 
-def backlash(p: Array, b: Array) -> Array:
-    """Clearance function ``g(p)``: ``p - b`` above ``b``, 0 inside ``|p| <= b``, ``p + b`` below."""
-    return p - jnp.clip(p, -b, b)
+def backlash(p: Array, b: Array, smoothing: float = 0.0) -> Array:
+    """Clearance function ``g(p)``: ``p - b`` above ``b``, 0 inside ``|p| <= b``, ``p + b`` below.
+
+    ``smoothing`` (static, dimensionless): 0 gives the exact piecewise-linear function;
+    ``s > 0`` rounds each corner over a width of about ``s b`` with
+    ``((p - b) + sqrt((p - b)^2 + e^2)) / 2 + ((p + b) - sqrt((p + b)^2 + e^2)) / 2``,
+    ``e = s b``: odd, C-infinity, within ``e / 2`` of the exact function, and exactly
+    ``p`` when ``b = 0``.
+    """
+    if not smoothing:
+        return p - jnp.clip(p, -b, b)
+    e = jnp.where(b > 0, smoothing * b, 1.0)  # any e > 0 where b = 0: that branch is unused
+    hi, lo = p - b, p + b
+    rounded = 0.5 * (hi + jnp.sqrt(hi**2 + e**2)) + 0.5 * (lo - jnp.sqrt(lo**2 + e**2))
+    return jnp.where(b > 0, rounded, p)
 
 
 def in_contact(p: Array, b: Array) -> Array:
@@ -40,19 +52,21 @@ def mesh_force(
     b: Array,
     c: Array,
     contact_damping: bool = False,
+    smoothing: float = 0.0,
 ) -> Array:
     """Mesh force (N) ``F = kbar kappa(t) g(p) + c p'``.
 
     **Arguments:** ``p``, ``p_dot``: deflection (m) and its rate (m/s) along the line of
     action; ``kappa``: dimensionless stiffness at the same instants; ``kbar``: mean
     stiffness (N/m); ``b``: half backlash (m); ``c``: damping (N s/m);
-    ``contact_damping``: apply the viscous term only while the teeth touch. All
+    ``contact_damping``: apply the viscous term only while the teeth touch;
+    ``smoothing``: corner rounding of the clearance function (:func:`backlash`). All
     arrays broadcast together (e.g. ``(m, T)`` against ``(m, 1)``).
     """
     damping = c * p_dot
     if contact_damping:
         damping = damping * in_contact(p, b)
-    return kbar * kappa * backlash(p, b) + damping
+    return kbar * kappa * backlash(p, b, smoothing) + damping
 
 
 def fourier_series(

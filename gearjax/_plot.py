@@ -88,3 +88,64 @@ def plot_sweep(ds, path: str, what: str = "rms", title: str = ""):
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def plot_verify(hb, ni, path: str, curve=None, title: str = ""):
+    """Integration points (markers) over the harmonic-balance RMS mesh forces, as the
+    paper's Figs 4 and 5.
+
+    ``hb``, ``ni``: results Datasets at the same points (``VerifyResult.hb``, ``.ni``);
+    ``curve``: an optional sweep Dataset drawn as the harmonic-balance line (otherwise
+    the line joins the ``hb`` points in frequency order). See :func:`plot_points`.
+    """
+    plot_points(ni, path, line=curve if curve is not None else hb,
+                title=title or "harmonic balance (lines) and time integration (markers)")
+
+
+def plot_points(ds, path: str, line=None, title: str = ""):
+    """RMS mesh forces of solution points as markers against reference-stage mesh
+    frequency, optionally over the lines of another results Dataset ``line``.
+
+    One panel per stage and mesh side, one colour per planet; open circles are
+    converged points, crosses points that did not converge (e.g. an integration that
+    did not settle to the base period). Meshes are matched by name.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    f_pts = np.asarray(ds["mesh_frequency_hz"]) / 1e3
+    settled = np.asarray(ds["converged"])
+    names = np.asarray(ds["mesh"]).tolist()
+    stages = list(dict.fromkeys(np.asarray(ds["stage"]).tolist()))
+    fig, axes = plt.subplots(len(stages), 2, figsize=(10, 3.2 * len(stages)), squeeze=False,
+                             sharex=True)
+    for r, stage in enumerate(stages):
+        for c, side in enumerate(("sun", "ring")):
+            ax = axes[r, c]
+            sel = (np.asarray(ds["stage"]) == stage) & (np.asarray(ds["side"]) == side)
+            for j in np.where(sel)[0]:
+                color = f"C{(int(ds['planet'][j]) - 1) % 10}"  # one colour per planet
+                label = f"planet {int(ds['planet'][j])}" if r == 0 and c == 0 else None
+                if line is not None:
+                    f_line = np.asarray(line["mesh_frequency_hz"]) / 1e3
+                    order = np.argsort(f_line)
+                    k = np.asarray(line["mesh"]).tolist().index(names[j])
+                    ax.plot(f_line[order], np.asarray(line["rms_force"])[order, k], "-", lw=1.0,
+                            color=color, label=label)
+                    label = None
+                y = np.asarray(ds["rms_force"])[:, j]
+                ax.plot(f_pts[settled], y[settled], "o", mfc="none", ms=6, color=color,
+                        label=label)
+                ax.plot(f_pts[~settled], y[~settled], "x", ms=6, color=color)
+            ax.set_title(f"stage {stage}, {side}-planet meshes", fontsize=9)
+            ax.set_ylabel("RMS mesh force (N)", fontsize=8)
+            ax.grid(alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(title or "RMS mesh forces (open circles converged, crosses not)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

@@ -29,9 +29,9 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from . import _aft
-from ._hb import HBProblem, hb_problem
-from ._mesh import in_contact, mesh_force
+
+from ._hb import HBProblem, hb_problem, mesh_samples
+from ._mesh import in_contact
 from ._static import static_deflection
 from ._system import System
 
@@ -143,14 +143,7 @@ def mesh_time_history(
     """
     if n_time is not None and n_time != problem.n_time:
         problem = hb_problem(problem.system, dataclasses.replace(problem.settings, n_time=n_time))
-    s, T = problem.system, problem.n_time
-    w0 = omega / problem.settings.eta
-    P = X @ s.W.T  # (2K+1, m)
-    p = _aft.synthesis(P, T).T - problem.te
-    p_dot = w0 * (_aft.synthesis(_aft.derivative(P), T).T - problem.te_rate)
-    F = mesh_force(p, p_dot, problem.kappa, s.kbar[:, None], s.backlash[:, None],
-                   s.damping[:, None], s.contact_damping)
-    return p, p_dot, F
+    return mesh_samples(problem, X @ problem.system.W.T, omega)
 
 
 def mesh_responses(

@@ -34,7 +34,7 @@ from ._errors import fail
 from ._kinematics import kinematics, require_base
 from ._responses import mesh_responses, static_mesh_forces
 from ._results import mesh_coordinates, sweep_dataset
-from ._stability import stability
+from ._stability import bifurcation_kind, stability
 from ._toml_io import dumps_train
 from ._train import Train
 
@@ -84,6 +84,7 @@ def sweep(
     max_step_hz: float | None = None,
     points: int = 300,
     max_points: int = 3000,
+    smoothing: float = 0.0,
     progress: Callable[[int, float], None] | None = None,
 ) -> SweepResult:
     """Frequency response of ``gear`` from ``from_hz`` to ``to_hz`` (reference-stage mesh Hz).
@@ -92,7 +93,9 @@ def sweep(
     ``linear``: drop the backlash; ``harmonics``: fixed K (default: frequency-dependent,
     :func:`harmonics_rule`); ``eta``: sub-harmonic index; ``max_step_hz``: largest
     frequency step; ``points``: grid size of a linear sweep; ``max_points``: cap on a
-    continuation; ``progress(points_done, frequency_hz)``: called per point.
+    continuation; ``smoothing``: corner rounding of the backlash relative to it (0: exact
+    piecewise-linear, see :func:`gearjax._mesh.backlash`); ``progress(points_done,
+    frequency_hz)``: called per point.
 
     **Raises:** ``TrainError`` for a gear where no mesh turns, an impractical ``mu``,
     an unknown stage, or backlash on an unloaded stage without ``drag_torque``.
@@ -115,6 +118,9 @@ def sweep(
         raise fail("command line", "--to", to_hz, "must differ from --from")
     if eta < 1:
         raise fail("command line", "--eta", eta, "must be an integer >= 1")
+    if not (0.0 <= smoothing < 1.0):
+        raise fail("command line", "--smoothing", smoothing,
+                   "must be >= 0 (0: exact backlash) and < 1 (relative to the backlash)")
     if harmonics is not None and harmonics < 1:
         raise fail("command line", "--harmonics", harmonics, "must be an integer >= 1")
 
@@ -124,14 +130,16 @@ def sweep(
     F_static = static_mesh_forces(system)
     solver = {"method": "harmonic balance", "linear": linear, "eta": eta,
               "segments": [list(s) for s in segments], "reference_stage": ref,
-              "max_step_hz": max_step_hz, "cutoff_hz": RESPONSE_CUTOFF_HZ}
+              "max_step_hz": max_step_hz, "cutoff_hz": RESPONSE_CUTOFF_HZ,
+              "smoothing": smoothing}
     rows: list[dict] = []
     folds: list[float] = []
     stop = "reached_end"
     y = None
     done = 0
     for f_a, f_b, K in segments:
-        problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=K, eta=eta))
+        problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=K, eta=eta,
+                                                             smoothing=smoothing))
         if linear:
             n = max(2, round(points * abs(f_b - f_a) / abs(to_hz - from_hz)))
             last = (f_b == segments[-1][1])
@@ -178,6 +186,7 @@ def sweep(
     omegas = data["omega"]
     f_ref = omegas * mu_ref / (2 * math.pi)
     stage_hz = np.outer(omegas / (2 * math.pi), np.asarray(mu, float))
+    bif = bifurcations(f_ref, data["stable"], data["multipliers"], data["excluded"])
     coords = mesh_coordinates(system)
     ds = sweep_dataset(
         data["responses"], **coords,
@@ -192,8 +201,10 @@ def sweep(
         gear=g.name,
         solver=solver,
         attrs={"folds_hz": folds, "stop": stop, "reference_stage": ref,
-               "command": " ".join(sys.argv)},
+               "bifurcations": bif, "command": " ".join(sys.argv)},
     )
+    ds["max_multiplier"] = ("point", data["max_multiplier"], {
+        "units": "1", "long_name": "largest Floquet multiplier modulus (rigid-body excluded)"})
     return SweepResult(dataset=ds, folds_hz=tuple(folds), stop=stop,
                        segments=tuple(segments), seconds=time.perf_counter() - t_start)
 
@@ -295,7 +306,23 @@ def _point_rows(problem, Xs, omegas, results, F_static):
     """Responses and stability of a batch of solutions (one compiled call per segment)."""
     resp, stab = _batch_post(problem, Xs, omegas, F_static)
     return {"responses": resp, "omega": np.asarray(omegas), "result": np.asarray(results),
-            "stable": np.asarray(stab.stable)}
+            "stable": np.asarray(stab.stable), "max_multiplier": np.asarray(stab.max_abs),
+            "multipliers": np.asarray(stab.multipliers), "excluded": np.asarray(stab.excluded)}
+
+
+def bifurcations(f_hz, stable, multipliers, excluded) -> list[dict]:
+    """Where stability changes between neighbouring points, and how (interface: a list of
+    ``{"mesh_frequency_hz", "kind"}``, the frequency the midpoint of the two points).
+
+    ``kind`` is from :func:`~gearjax._stability.bifurcation_kind`: ``fold``,
+    ``period_doubling`` or ``neimark_sacker`` (``None`` where no multiplier left the unit
+    circle, e.g. a change in the excluded rigid-body set).
+    """
+    out = []
+    for i in np.flatnonzero(np.asarray(stable[1:]) != np.asarray(stable[:-1])):
+        kind = bifurcation_kind(multipliers[i][~excluded[i]], multipliers[i + 1][~excluded[i + 1]])
+        out.append({"mesh_frequency_hz": float((f_hz[i] + f_hz[i + 1]) / 2), "kind": kind})
+    return out
 
 
 @jax.jit
@@ -331,6 +358,7 @@ def summary_json(result: SweepResult) -> dict:
         "reference_stage": ds.attrs.get("reference_stage"),
         "stop": result.stop,
         "folds_hz": list(result.folds_hz),
+        "bifurcations": json.loads(ds.attrs.get("bifurcations", "[]")),
         "segments": [list(s) for s in result.segments],
         "seconds": result.seconds,
         "points": points_json(ds),

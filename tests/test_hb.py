@@ -97,3 +97,23 @@ def test_newton_converges_on_paper_case_with_backlash(paper):
     # mean mesh forces carry the static load: stage-1 sun mesh 8942 N
     P = sol.X @ paper.W.T
     assert float(jnp.max(jnp.abs(P[0] - (8942.2 / 4.5e8 + 5e-5)) [:4])) < 2e-6
+
+
+def test_smoothed_backlash_is_close_odd_and_exact_without_clearance():
+    p = jnp.linspace(-3e-4, 3e-4, 601)
+    b, s = 1e-4, 1e-2
+    g, g0 = gj.backlash(p, b, s), gj.backlash(p, b)
+    assert float(jnp.max(jnp.abs(g - g0))) <= s * b / 2 * (1 + 1e-12)
+    np.testing.assert_allclose(gj.backlash(-p, b, s), -g, atol=1e-20)
+    np.testing.assert_array_equal(gj.backlash(p, 0.0, s), p)
+    assert np.all(np.isfinite(jax.vmap(jax.grad(lambda q: gj.backlash(q, 0.0, s)))(p)))
+
+
+def test_structured_jacobian_with_smoothed_backlash(paper):
+    problem = _hb.hb_problem(paper, _hb.HarmonicBalance(n_harmonics=6, n_time=64, smoothing=0.05))
+    omega = 2 * np.pi * 4000 / 7
+    y = _hb.linear_guess(problem, omega)
+    y = y + 0.5 * jax.random.normal(jax.random.PRNGKey(1), y.shape)
+    J = _hb.jacobian(problem, y, omega)
+    J_ad = jax.jacfwd(lambda v: _hb.residual(problem, v, omega))(y)
+    np.testing.assert_allclose(J, J_ad, atol=1e-13 * float(jnp.max(jnp.abs(J_ad))))

@@ -75,3 +75,22 @@ def test_linear_sweep_json_and_files(capsys, tmp_path):
     assert fig.stat().st_size > 10_000
     assert all(math.isfinite(m["rms_force"]) for m in p["meshes"])
     assert np.all(ds["converged"].values)
+
+
+def test_nonlinear_sweep_keeps_mean_load_and_reports_stability(train):
+    """A short continuation with backlash: every point converged, stability and
+    bifurcations reported, no back-side contact, and the mean mesh forces summed over
+    the planets equal the static ones (equilibrium of the mean, whatever the dynamics)."""
+    r = _sweep.sweep(train, "first", 2400, 2550, harmonics=16, max_step_hz=20)
+    ds = r.dataset
+    assert r.stop == "reached_end" and ds.sizes["point"] >= 8
+    assert np.all(ds["converged"].values) and set(np.unique(ds["stable"].values)) <= {0, 1}
+    assert "bifurcations" in _sweep.summary_json(r)
+    assert np.all(ds["back_contact"].values == 0.0)
+    for stage in ("1", "2"):
+        for side in ("sun", "ring"):
+            cols = (ds["stage"].values == stage) & (ds["side"].values == side)
+            mean = ds["mean_force"].values[:, cols].sum(axis=1)
+            np.testing.assert_allclose(mean, ds["static_force"].values[cols].sum(), rtol=1e-3)
+    f = ds["mesh_frequency_hz"].values  # --max-step bounds the predictor; the corrector
+    assert np.all(np.diff(f) <= 1.05 * 20)  # moves the frequency by a few percent of it
