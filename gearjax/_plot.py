@@ -54,37 +54,57 @@ def plot_sweep(ds, path: str, what: str = "rms", title: str = ""):
     period) or ``torque`` (mean transmitted torque, N m). One panel per stage and mesh
     side, the planets' curves overlaid; stable solid, unstable dashed, unknown dotted.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     var, label = {"rms": ("rms_force", "RMS mesh force (N)"), "dlf": ("dlf", "dynamic load factor"),
                   "separation": ("separation", "share of period in separation"),
                   "torque": ("mean_torque", "mean transmitted torque (N m)")}[what]
     f = np.asarray(ds["mesh_frequency_hz"]) / 1e3
     stable = np.asarray(ds["stable"]) if "stable" in ds else np.full(f.shape, -1)
+    fig, axes, panels = _mesh_panels(ds, label)
+    for ax, first, meshes in panels:
+        for j in meshes:
+            y = np.asarray(ds[var])[:, j]
+            for flag, style in ((1, "-"), (0, "--"), (-1, ":")):
+                yy = np.where(stable == flag, y, np.nan)
+                ax.plot(f, yy, style, lw=1.0, color=f"C{j % 10}",
+                        label=(f"planet {int(ds['planet'][j])}" if flag == 1 and first else None))
+    _finish(fig, axes, ds, path, title or "frequency response (solid stable, dashed unstable)")
+
+
+def _mesh_panels(ds, ylabel: str):
+    """A figure with one panel per stage (rows) and mesh side (sun, ring: columns).
+
+    **Returns:** ``(fig, axes, panels)``, ``panels`` a list of ``(ax, first, meshes)``:
+    the panel, whether it is the first (it carries the legend) and the indices of its
+    meshes in ``ds``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     stages = list(dict.fromkeys(np.asarray(ds["stage"]).tolist()))
     fig, axes = plt.subplots(len(stages), 2, figsize=(10, 3.2 * len(stages)), squeeze=False,
                              sharex=True)
+    panels = []
     for r, stage in enumerate(stages):
         for c, side in enumerate(("sun", "ring")):
             ax = axes[r, c]
             sel = (np.asarray(ds["stage"]) == stage) & (np.asarray(ds["side"]) == side)
-            for j in np.where(sel)[0]:
-                y = np.asarray(ds[var])[:, j]
-                for flag, style in ((1, "-"), (0, "--"), (-1, ":")):
-                    yy = np.where(stable == flag, y, np.nan)
-                    ax.plot(f, yy, style, lw=1.0, color=f"C{j % 10}",
-                            label=(f"planet {int(ds['planet'][j])}"
-                                   if flag == 1 and r == 0 and c == 0 else None))
             ax.set_title(f"stage {stage}, {side}-planet meshes", fontsize=9)
-            ax.set_ylabel(label, fontsize=8)
+            ax.set_ylabel(ylabel, fontsize=8)
             ax.grid(alpha=0.3)
+            panels.append((ax, r == 0 and c == 0, np.where(sel)[0]))
+    return fig, axes, panels
+
+
+def _finish(fig, axes, ds, path, title: str) -> None:
+    """Frequency labels, legend and title; save to ``path`` and close."""
+    import matplotlib.pyplot as plt
+
     for ax in axes[-1]:
         ax.set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
     axes[0, 0].legend(fontsize=7)
-    fig.suptitle(title or "frequency response (solid stable, dashed unstable)", fontsize=10)
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -110,42 +130,22 @@ def plot_points(ds, path: str, line=None, title: str = ""):
     converged points, crosses points that did not converge (e.g. an integration that
     did not settle to the base period). Meshes are matched by name.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     f_pts = np.asarray(ds["mesh_frequency_hz"]) / 1e3
     settled = np.asarray(ds["converged"])
     names = np.asarray(ds["mesh"]).tolist()
-    stages = list(dict.fromkeys(np.asarray(ds["stage"]).tolist()))
-    fig, axes = plt.subplots(len(stages), 2, figsize=(10, 3.2 * len(stages)), squeeze=False,
-                             sharex=True)
-    for r, stage in enumerate(stages):
-        for c, side in enumerate(("sun", "ring")):
-            ax = axes[r, c]
-            sel = (np.asarray(ds["stage"]) == stage) & (np.asarray(ds["side"]) == side)
-            for j in np.where(sel)[0]:
-                color = f"C{(int(ds['planet'][j]) - 1) % 10}"  # one colour per planet
-                label = f"planet {int(ds['planet'][j])}" if r == 0 and c == 0 else None
-                if line is not None:
-                    f_line = np.asarray(line["mesh_frequency_hz"]) / 1e3
-                    order = np.argsort(f_line)
-                    k = np.asarray(line["mesh"]).tolist().index(names[j])
-                    ax.plot(f_line[order], np.asarray(line["rms_force"])[order, k], "-", lw=1.0,
-                            color=color, label=label)
-                    label = None
-                y = np.asarray(ds["rms_force"])[:, j]
-                ax.plot(f_pts[settled], y[settled], "o", mfc="none", ms=6, color=color,
-                        label=label)
-                ax.plot(f_pts[~settled], y[~settled], "x", ms=6, color=color)
-            ax.set_title(f"stage {stage}, {side}-planet meshes", fontsize=9)
-            ax.set_ylabel("RMS mesh force (N)", fontsize=8)
-            ax.grid(alpha=0.3)
-    for ax in axes[-1]:
-        ax.set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
-    axes[0, 0].legend(fontsize=7)
-    fig.suptitle(title or "RMS mesh forces (open circles converged, crosses not)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    fig, axes, panels = _mesh_panels(ds, "RMS mesh force (N)")
+    for ax, first, meshes in panels:
+        for j in meshes:
+            color = f"C{(int(ds['planet'][j]) - 1) % 10}"  # one colour per planet
+            label = f"planet {int(ds['planet'][j])}" if first else None
+            if line is not None:
+                f_line = np.asarray(line["mesh_frequency_hz"]) / 1e3
+                order = np.argsort(f_line)
+                k = np.asarray(line["mesh"]).tolist().index(names[j])
+                ax.plot(f_line[order], np.asarray(line["rms_force"])[order, k], "-", lw=1.0,
+                        color=color, label=label)
+                label = None
+            y = np.asarray(ds["rms_force"])[:, j]
+            ax.plot(f_pts[settled], y[settled], "o", mfc="none", ms=6, color=color, label=label)
+            ax.plot(f_pts[~settled], y[~settled], "x", ms=6, color=color)
+    _finish(fig, axes, ds, path, title or "RMS mesh forces (open circles converged, crosses not)")
