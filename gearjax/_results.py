@@ -300,6 +300,10 @@ def points_json(ds: xr.Dataset) -> list[dict]:
             "period": _number(ds["period"].values[k]) if "period" in ds else None,
             "meshes": meshes,
         })
+        if "period" in ds and not ds["period"].values[k] > 0:  # 0: no repeat found
+            points[-1]["period"] = None
+            points[-1]["period_reason"] = ("the orbit did not repeat within the integrated "
+                                           "base periods (quasi-periodic, chaotic or not settled)")
     return points
 
 

@@ -125,3 +125,9 @@ def test_unsupported_suffix_and_bad_shapes_are_refused(paper_meshes, tmp_path):
         gj.sweep_dataset(MeshResponses(**good), **paper_meshes, mesh_frequency_hz=np.zeros(P),
                          stage_mesh_frequency_hz=np.zeros(P), input_rpm=np.zeros(P),
                          omega=np.zeros(P), result=["converged"] * P)
+
+
+def test_json_period_is_null_with_a_reason_when_no_repeat_was_found(paper_meshes):
+    points = gj.points_json(make_dataset(paper_meshes, period=[1.0, 2.0, 0.0]))
+    assert [p["period"] for p in points] == [1.0, 2.0, None]
+    assert "period_reason" not in points[0] and "did not repeat" in points[2]["period_reason"]
