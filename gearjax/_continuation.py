@@ -185,9 +185,9 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
     for the next corrector. When the chord iterations stop contracting (the Jacobian
     changed over the step: with exact backlash a time sample crossed a contact
     boundary) the attempt restarts from the predictor in full Newton, refactorising
-    at every iterate, before the step is given up. On success the state moves to the new point with a grown
-    or kept step; on failure it stays and the step halves (the caller stops below
-    ``min_step``).
+    at every iterate, before the step is given up. On success the state moves to the
+    new point with a grown or kept step; on failure it stays and the step halves (the
+    caller stops below ``min_step``).
     """
     h = jnp.minimum(state.h, settings.max_dlambda / jnp.maximum(jnp.abs(state.tlam), 1e-12))
     y_p = state.y + h * state.ty
@@ -201,7 +201,8 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
 
     def body(c):
         # full Newton (after the chord failed): the bordered Jacobian at the iterate
-        lu, piv = jax.lax.cond(c.full, lambda: bordered_lu(c.y, c.lam), lambda: (state.lu, state.piv))
+        lu, piv = jax.lax.cond(c.full, lambda: bordered_lu(c.y, c.lam),
+                               lambda: (state.lu, state.piv))
         r = param.residual(c.y, c.lam)
         arc = state.ty @ (c.y - y_p) + state.tlam * (c.lam - lam_p)
         d = jax.scipy.linalg.lu_solve((lu, piv), -jnp.concatenate([r, arc[None]]))
