@@ -402,7 +402,8 @@ def _simulate_cmd(args, train, notes) -> int:
     for k, p in enumerate(out["points"]):
         cols = [np.nanmax(rms[k, ds["stage"].values == s]) if p["converged"] or
                 p["result"] == "not_periodic" else math.nan for s in stages]
-        print(f"{p['mesh_frequency_hz']:>9.1f} {p['result']:>13} {p['period']:>6.0f} "
+        period = "-" if p["period"] is None else f"{p['period']:.0f}"
+        print(f"{p['mesh_frequency_hz']:>9.1f} {p['result']:>13} {period:>6} "
               f"{p['periods']:>7} " + " ".join(f"{c:>14.1f}" for c in cols))
     if args.out:
         print(f"results written to {args.out}")

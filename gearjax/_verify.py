@@ -312,7 +312,7 @@ def verify_json(result: VerifyResult) -> dict:
             "result_hb": res_hb,
             "result_ni": res_ni,
             "stable": None if stable < 0 else bool(stable),
-            "period": int(ni["period"].values[k]),
+            "period": int(ni["period"].values[k]) or None,  # 0: no repeat found
             "harmonics": int(hb["harmonics"].values[k]),
             "ok": bool(np.all(result.ok[k])),
             "meshes": meshes,
