@@ -271,20 +271,32 @@ def _solve_points(problem, omegas):
 
 def _enter_segment(problem, param, previous, lam, omega_ref):
     """Scaled unknowns converged at ``lam`` with this segment's harmonics."""
-    omega = lam * omega_ref
     if previous is None:
-        sol = _newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
-        if int(sol.result) != _hb.CONVERGED:  # homotopy in backlash, 0 -> b
-            sol = _backlash_homotopy(problem, omega)
-        return sol.y, int(sol.result)
+        return start_point(problem, lam * omega_ref)
     K_old, y_old, lam_old = previous
+    sol = _newton_jit(problem, jnp.asarray(lam_old * omega_ref),
+                      resize_harmonics(y_old, K_old, problem))
+    return sol.y, int(sol.result)
+
+
+def start_point(problem, omega):
+    """``(y, result code)`` at ``omega``: Newton from the linear, in-contact guess; with
+    backlash, the homotopy in backlash 0 -> b when that fails."""
+    sol = _newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
+    if int(sol.result) != _hb.CONVERGED and bool(jnp.any(problem.system.backlash > 0)):
+        sol = _backlash_homotopy(problem, omega)
+    return sol.y, int(sol.result)
+
+
+def resize_harmonics(y, K_old: int, problem):
+    """Scaled unknowns of ``K_old`` harmonics padded with zeros or truncated to
+    ``problem``'s K (flat)."""
     C, n = problem.shape
-    old = np.asarray(y_old).reshape(2 * K_old + 1, n)
+    old = np.asarray(y).reshape(2 * K_old + 1, n)
     new = np.zeros((C, n))
     rows = min(C, old.shape[0])
     new[:rows] = old[:rows]
-    sol = _newton_jit(problem, jnp.asarray(lam_old * omega_ref), jnp.asarray(new.reshape(-1)))
-    return sol.y, int(sol.result)
+    return jnp.asarray(new.reshape(-1))
 
 
 _newton_jit = jax.jit(_hb.newton)

@@ -219,10 +219,10 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
             y, code = None, _hb.MAX_STEPS
             if previous is not None:
                 sol = _sweep._newton_jit(problem, jnp.asarray(omegas[i]),
-                                         _resize(previous, problem))
+                                         _sweep.resize_harmonics(*previous, problem))
                 y, code = sol.y, int(sol.result)
             if code != _hb.CONVERGED:
-                y, code = _start(problem, omegas[i])
+                y, code = _sweep.start_point(problem, omegas[i])
             ys[i], result[i] = y, code
             if code == _hb.CONVERGED:
                 previous = (y, int(ks[i]))
@@ -251,25 +251,6 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
     return {"X": X, "harmonics": ks, "result": result, "stable": np.where(failed, np.nan,
                                                                            stable),
             "responses": responses}
-
-
-def _start(problem, omega):
-    """Newton from the linear guess; with backlash, the backlash homotopy if it fails."""
-    sol = _sweep._newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
-    if int(sol.result) != _hb.CONVERGED and bool(jnp.any(problem.system.backlash > 0)):
-        sol = _sweep._backlash_homotopy(problem, omega)
-    return sol.y, int(sol.result)
-
-
-def _resize(previous, problem):
-    """Scaled unknowns of another K padded with zeros or truncated to ``problem``'s K."""
-    y, K_old = previous
-    C, n = problem.shape
-    old = np.asarray(y).reshape(2 * K_old + 1, n)
-    new = np.zeros((C, n))
-    rows = min(C, old.shape[0])
-    new[:rows] = old[:rows]
-    return jnp.asarray(new.reshape(-1))
 
 
 # ------------------------------------------------------------------------------ JSON
