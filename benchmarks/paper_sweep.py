@@ -22,11 +22,56 @@ import pathlib
 import sys
 import warnings
 
+import dataclasses
+import time
+
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 import gearjax as gj
+from gearjax import _hb
+from gearjax._assembly import assemble
 from gearjax._plot import plot_sweep
+from gearjax._stability import stability
 from gearjax._sweep import progress_printer, sweep
+
+
+def _best_of(fn, *args, repeat: int = 5) -> float:
+    """Best wall time (s) of ``fn(*args)`` after one warm-up call (compile excluded)."""
+    jax.block_until_ready(fn(*args))
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        times.append(time.perf_counter() - t)
+    return min(times)
+
+
+def breakdown(train, result) -> None:
+    """Cost of one residual, one structured Jacobian, one LU factorisation + solve and one
+    Floquet stability evaluation per segment's K, at a point of the sweep (ms)."""
+    ds = result.dataset
+    system = assemble(train, "first")
+    if bool(json.loads(ds.attrs["solver"])["linear"]):
+        system = dataclasses.replace(system, backlash=jnp.zeros_like(system.backlash))
+    print(f"{'K':>4} {'unknowns':>9} {'residual':>9} {'jacobian':>9} {'LU+solve':>9} "
+          f"{'stability':>10}  (ms, one evaluation, compile excluded)")
+    for f_a, f_b, K in result.segments:
+        problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=K))
+        i = int(np.argmin(np.abs(ds["mesh_frequency_hz"].values - (f_a + f_b) / 2)))
+        omega = jnp.asarray(float(ds["omega"].values[i]))
+        y = _hb.linear_guess(problem, omega)
+        res = jax.jit(_hb.residual)
+        jac = jax.jit(_hb.jacobian)
+        J = jac(problem, y, omega)
+        lu = jax.jit(lambda A, b: jax.scipy.linalg.lu_solve(jax.scipy.linalg.lu_factor(A), b))
+        X = y.reshape(problem.shape) * problem.x_scale
+        stab = jax.jit(stability)
+        print(f"{K:>4} {problem.size:>9} {1e3 * _best_of(res, problem, y, omega):>9.2f} "
+              f"{1e3 * _best_of(jac, problem, y, omega):>9.2f} "
+              f"{1e3 * _best_of(lu, J, y):>9.2f} "
+              f"{1e3 * _best_of(stab, problem, X, omega, repeat=2):>10.2f}")
 
 
 def report(name, result) -> None:
@@ -75,6 +120,7 @@ def main() -> None:
         result = sweep(train, "first", args.f_from, args.f_to, linear=linear, points=args.points,
                        max_points=args.max_points, progress=progress_printer(sys.stderr))
         report(name, result)
+        breakdown(train, result)
         gj.save_results(result.dataset, out / f"paper_{name}.nc")
         plot_sweep(result.dataset, out / f"paper_{name}.png",
                    title=f"paper first gear, {name}")

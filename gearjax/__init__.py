@@ -3,6 +3,13 @@
 from . import _config  # noqa: F401  (float64 on import)
 from ._assembly import assemble as assemble
 from ._calibrate import CalibrationResult as CalibrationResult, calibrate as calibrate
+from ._campbell import Campbell as Campbell, Crossing as Crossing, campbell as campbell
+from ._design import (
+    DesignSweep as DesignSweep,
+    batched_rms as batched_rms,
+    design_mesh as design_mesh,
+    design_sweep as design_sweep,
+)
 from ._errors import GeometryWarning as GeometryWarning, TrainError as TrainError
 from ._kinematics import Kinematics as Kinematics, kinematics as kinematics
 from ._mesh import (
@@ -13,6 +20,13 @@ from ._mesh import (
     stiffness_amplitudes as stiffness_amplitudes,
 )
 from ._modal import ModalResult as ModalResult, generalized_eigvals as generalized_eigvals, modes as modes
+from ._optimize import (
+    OptimizeResult as OptimizeResult,
+    OptimizeSettings as OptimizeSettings,
+    admissible_planet_sets as admissible_planet_sets,
+    optimize as optimize,
+    optimize_dataset as optimize_dataset,
+)
 from ._paths import get_path as get_path, set_path as set_path, continuous_paths as continuous_paths
 from ._responses import (
     MeshResponses as MeshResponses,

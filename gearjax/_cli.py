@@ -1,5 +1,5 @@
 """The ``gearjax`` command line (interface.md): info, modes, calibrate, sweep, simulate,
-verify, sensitivity.
+verify, sensitivity, optimize.
 
 Exit codes: 0 finished; 2 bad input or usage (one line on stderr, no traceback);
 3 finished but nothing converged. ``--json`` prints one JSON object on stdout and
@@ -29,6 +29,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return EXIT_INPUT
     try:
+        if not getattr(args, "needs_train", True):  # e.g. plot: a results file, no train
+            return args.run(args, None, [])
         from ._toml_io import load_train
 
         with warnings.catch_warnings(record=True) as caught:
@@ -88,7 +90,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="round the backlash corners over REL x backlash (default 0: exact)")
     c.add_argument("--out", metavar="FILE.nc|.csv", help="write the results")
     c.add_argument("--plot", metavar="FIG", help="write the RMS mesh forces")
-    c.add_argument("--resume", action="store_true", help=argparse.SUPPRESS)
+    c.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run from FILE.journal, the journal --out keeps")
     c = command("simulate", _simulate_cmd, "steady states by time integration")
     _point_flags(c)
     c.add_argument("--out", metavar="FILE.nc|.csv", help="write the results")
@@ -106,6 +109,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="write integration points over the harmonic-balance curve")
     c.add_argument("--curve", metavar="RESULTS.nc",
                    help="a saved sweep to draw as the harmonic-balance curve in --plot")
+    c.add_argument("--out", metavar="FILE.nc",
+                   help="write both point sets (groups hb and ni) for gearjax plot")
     c = command("sensitivity", _sensitivity_cmd,
                 "derivatives of a mesh response at one frequency w.r.t. train parameters")
     c.add_argument("--at", type=float, required=True, metavar="HZ",
@@ -114,11 +119,59 @@ def _parser() -> argparse.ArgumentParser:
                    help="RMS alternating force, peak force or dynamic load factor")
     c.add_argument("--mesh", metavar="NAME", help="mesh such as 1.sp1 (default: largest)")
     c.add_argument("--vary", nargs="+", metavar="PATH",
-                   help="TOML paths (default: every continuous parameter)")
+                   help="TOML paths (default: every continuous parameter that affects the "
+                        "gear)")
     c.add_argument("--stage", help="reference stage id (default: first turning stage)")
     c.add_argument("--linear", action="store_true", help="no backlash")
     c.add_argument("--harmonics", type=int, metavar="K",
                    help="solution harmonics (default: frequency-dependent)")
+    c = command("optimize", _optimize_cmd,
+                "planet positions, sun-ring and stage phases that minimise the peak RMS "
+                "mesh force over a band")
+    c.add_argument("--band", type=float, nargs=2, default=[2000.0, 15000.0],
+                   metavar=("LO", "HI"),
+                   help="reference-stage mesh frequencies (Hz), default 2000 15000")
+    c.add_argument("--vary", nargs="+", metavar="PATH",
+                   help="STAGE.planet_angles_deg, STAGE.sun_ring_phase_deg, "
+                        "STAGE.stage_phase_deg (default: all of the turning stages)")
+    c.add_argument("--stage", help="reference stage id (default: first turning stage)")
+    c.add_argument("--out-train", metavar="FILE.toml", help="write the optimised train")
+    c.add_argument("--out", metavar="FILE.nc", help="write the baseline, optimum and every "
+                   "screened candidate (NetCDF)")
+    c.add_argument("--harmonics", type=int, metavar="K",
+                   help="harmonics of the linear screen and the sweeps (default: the highest "
+                        "excitation order)")
+    c.add_argument("--points", type=int, default=32, metavar="N",
+                   help="frequencies per candidate of the linear screen (default 32)")
+    c.add_argument("--final-points", type=int, default=96, metavar="N",
+                   help="geometric frequencies of the grid the baseline and optimum are "
+                        "compared on (default 96, plus their resonance peaks)")
+    c.add_argument("--proxy-points", type=int, default=256, metavar="N",
+                   help="frequencies of the first-order proxy (default 256)")
+    c.add_argument("--phase-grid", type=int, default=24, metavar="N",
+                   help="sun-ring phases tried per planet set (default 24)")
+    c.add_argument("--screen", type=int, default=24, metavar="N",
+                   help="candidates per stage solved by the linear harmonic balance (default 24)")
+    c.add_argument("--nonlinear", type=int, default=2, metavar="N",
+                   help="best candidates per stage swept with backlash (default 2; 0: decide "
+                        "on the linear model)")
+    c.add_argument("--max-step", type=float, metavar="HZ",
+                   help="largest frequency step of those sweeps")
+    c.add_argument("--max-points", type=int, default=400, metavar="N",
+                   help="continuation points per sweep before it restarts higher (default 400)")
+    c.add_argument("--relax-iterations", type=int, default=10, metavar="N",
+                   help="L-BFGS iterations of the continuous relaxation (0: skip)")
+    c.add_argument("--passes", type=int, default=1, metavar="N",
+                   help="rounds over the stages (default 1)")
+    c = sub.add_parser("plot", help="redraw a saved result (sweep, simulate, verify)",
+                       description="redraw a saved result (sweep, simulate, verify) without "
+                                   "recomputing")
+    c.add_argument("results", metavar="RESULTS.nc", help="a results file written with --out")
+    c.add_argument("--what", choices=("rms", "dlf", "separation", "torque"), default="rms",
+                   help="RMS mesh force, dynamic load factor, separation share or mean torque")
+    c.add_argument("--out", metavar="FIG", help="figure file (default: RESULTS with .png)")
+    c.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    c.set_defaults(run=_plot_cmd, needs_train=False)
     return p
 
 
@@ -303,23 +356,28 @@ def _calibrate(args, train, notes) -> int:
 
 
 def _sweep_cmd(args, train, notes) -> int:
+    from ._journal import journal_path
     from ._results import save_results
     from ._sweep import progress_printer, summary_json, sweep
 
-    if args.resume:
-        raise fail("command line", "--resume", True,
-                   "resuming a sweep is not available yet (journaling lands with issue 6)")
     if args.out and not args.out.endswith((".nc", ".csv")):
         raise fail("command line", "--out", args.out, "must end in .nc or .csv")
+    if args.resume and not args.out:
+        raise fail("command line", "--resume", True, "needs --out FILE: the run to resume "
+                   "is the one whose journal FILE.journal is there")
+    journal = journal_path(args.out) if args.out else None
+    if args.resume and journal.exists():
+        _stderr(f"sweep: resuming from {journal}")
     g = train.gear(args.gear)
     result = sweep(train, g.name, args.from_hz, args.to_hz, stage=args.stage,
                    linear=args.linear, harmonics=args.harmonics, eta=args.eta,
                    max_step_hz=args.max_step, points=args.points,
                    max_points=args.max_points, smoothing=args.smoothing,
-                   progress=progress_printer(sys.stderr))
+                   progress=progress_printer(sys.stderr), journal=journal, resume=args.resume)
     ds = result.dataset
     if args.out:
         save_results(ds, args.out)
+        journal.unlink()  # consolidated into the results file
     if args.plot:
         from ._plot import plot_sweep
 
@@ -341,6 +399,9 @@ def _sweep_cmd(args, train, notes) -> int:
         f"{a:.0f}-{b:.0f} K={k}" for a, b, k in result.segments))
     if result.folds_hz:
         print("folds at " + ", ".join(f"{f:.1f}" for f in result.folds_hz) + " Hz")
+    for r in result.restarts:
+        print(f"branch left at {r['from_hz']:.1f} Hz ({r['reason']}); new branch from "
+              f"{r['at_hz']:.1f} Hz")
     print(f"unstable points: {int(np.sum(stable == 0))}")
     for b in out["bifurcations"]:
         print(f"  stability changes near {b['mesh_frequency_hz']:.1f} Hz: {b['kind']}")
@@ -413,8 +474,11 @@ def _simulate_cmd(args, train, notes) -> int:
 
 
 def _verify_cmd(args, train, notes) -> int:
-    from ._verify import verify_gear, verify_json
+    from ._verify import save_verify, verify_gear, verify_json
 
+    if args.out and not args.out.endswith(".nc"):
+        raise fail("command line", "--out", args.out, "must end in .nc (NetCDF, groups hb "
+                   "and ni)")
     g = train.gear(args.gear)
     curve = None
     if args.curve:
@@ -435,6 +499,8 @@ def _verify_cmd(args, train, notes) -> int:
         plot_verify(result.hb, result.ni, args.plot, curve=curve,
                     title=f"{train.name}: gear {g.name}, {kind}: harmonic balance (line) and "
                           "time integration (markers)")
+    if args.out:
+        save_verify(result, args.out)
     out = verify_json(result)
     out["warnings"] = notes
     converged = any(p["converged"] for p in out["points"])
@@ -461,9 +527,25 @@ def _verify_cmd(args, train, notes) -> int:
         stable = {None: "?", True: "yes", False: "no"}[p["stable"]]
         print(f"{p['mesh_frequency_hz']:>9.1f} {p['harmonics']:>3} {p['result_hb']:>10} "
               f"{p['result_ni']:>13} {stable:>6} " + tail + ("" if p["ok"] else "  NOT OK"))
+    if args.out:
+        print(f"results written to {args.out}")
     if args.plot:
         print(f"figure written to {args.plot}")
     return code
+
+
+# ----------------------------------------------------------------------------- plot
+
+
+def _plot_cmd(args, train, notes) -> int:
+    from ._plot import plot_results
+
+    kind, fig = plot_results(args.results, args.out, what=args.what)
+    if args.json:
+        return _emit({"results": args.results, "kind": kind, "what": args.what,
+                      "figure": str(fig)})
+    print(f"{kind} results {args.results}: figure ({args.what}) written to {fig}")
+    return EXIT_OK
 
 
 # ---------------------------------------------------------------------- sensitivity
@@ -497,6 +579,77 @@ def _sensitivity_cmd(args, train, notes) -> int:
         print(f"{row['path']:>28} {row['value']:>12.5g} {row['derivative']:>+13.5e} "
               f"{row['unit']:>8} {norm:>12}")
     return code
+
+
+# ------------------------------------------------------------------------- optimize
+
+
+def _optimize_cmd(args, train, notes) -> int:
+    from ._optimize import OptimizeSettings, optimize, optimize_dataset, optimize_json
+    from ._results import save_results
+    from ._toml_io import save_train
+
+    if args.out and not args.out.endswith(".nc"):
+        raise fail("command line", "--out", args.out, "must end in .nc (NetCDF)")
+    if args.out_train and not args.out_train.endswith(".toml"):
+        raise fail("command line", "--out-train", args.out_train, "must end in .toml")
+    settings = OptimizeSettings(
+        proxy_points=args.proxy_points, phase_grid=args.phase_grid, screen=args.screen,
+        screen_points=args.points, final_points=args.final_points, harmonics=args.harmonics,
+        nonlinear=args.nonlinear,
+        max_step_hz=args.max_step, max_points=args.max_points,
+        relax_iterations=args.relax_iterations,
+        passes=args.passes)
+    g = train.gear(args.gear)
+    result = optimize(train, g.name, tuple(args.band), args.vary, stage=args.stage,
+                      settings=settings, progress=_stderr)
+    if args.out_train:
+        save_train(result.train, args.out_train)
+    if args.out:
+        save_results(optimize_dataset(result, {"command": " ".join(sys.argv)}), args.out)
+    out = optimize_json(result)
+    out.update(out_train=args.out_train, out=args.out, warnings=notes)
+    code = EXIT_OK if result.converged else EXIT_NOT_CONVERGED
+    if args.json:
+        _emit(out)
+        return code
+    b, o = result.baseline, result.optimum
+    print(f"phasing optimisation of gear {g.name!r}, band {result.band_hz[0]:g}-"
+          f"{result.band_hz[1]:g} Hz (stage {result.reference_stage}), varying "
+          f"{', '.join(result.vary)}: {result.seconds:.0f} s")
+    print(f"{'':>10} {'peak RMS, linear (N)':>22} {'with backlash (N)':>18}  "
+          "planet angles, phases")
+    for name, d in (("baseline", b), ("optimum", o)):
+        nl = "-" if d.nonlinear is None else f"{d.nonlinear_peak:.1f}"
+        print(f"{name:>10} {d.linear_peak:>22.1f} {nl:>18}  " + _values_text(d.values))
+    r = result.relaxation
+    if r is not None:
+        print(f"{'relaxed':>10} {r.linear_peak:>22.1f} {'-':>18}  " + _values_text(r.values)
+              + "  (continuous: not assemblable)")
+    for s in result.stages:
+        print(f"stage {s['stage']}: {s['planet_sets']} admissible planet sets"
+              + (f" ({s['screened_sets']} rotation classes)" if s["modulo_rotation"] else "")
+              + f", {s['linear_screened']} solved linear, {s['nonlinear_swept']} with "
+              f"backlash: {s['chosen']}")
+    if args.out_train:
+        print(f"optimised train written to {args.out_train}")
+    if args.out:
+        print(f"results written to {args.out}")
+    return code
+
+
+def _values_text(values: dict) -> str:
+    """``1.planet_angles_deg [0, 90, ...]``-style summary of design values."""
+    planets: dict[str, list[float]] = {}
+    rest = []
+    for path, v in values.items():
+        sid, key, *i = path.split(".")
+        if key == "planet_angles_deg":
+            planets.setdefault(sid, [0.0]).append(v)
+        else:
+            rest.append(f"{path} {v:.4g}")
+    return ", ".join([f"{sid}.planets [" + ", ".join(f"{a:.4g}" for a in a_s) + "]"
+                      for sid, a_s in planets.items()] + rest)
 
 
 # ----------------------------------------------------------------------------- JSON

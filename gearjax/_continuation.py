@@ -28,7 +28,7 @@ from jaxtyping import Array
 
 from . import _hb
 
-STOP_REASONS = ("reached_end", "max_points", "step_too_small", "nonfinite")
+STOP_REASONS = ("reached_end", "max_points", "step_too_small", "nonfinite", "closed_loop")
 REACHED_END, MAX_POINTS, STEP_TOO_SMALL, STOP_NONFINITE = range(4)
 
 
@@ -348,14 +348,24 @@ def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Setti
                     max_points: int = 2000, on_point: Callable | None = None,
                     state: ArcState | None = None) -> Branch:
     """Continuation driven from Python: one jitted step per call, ``on_point(i, state)``
-    after each accepted point (progress, journaling). Keeps every point reached when
-    it has to stop, with the reason. ``state`` resumes from a saved state."""
+    after each accepted point (progress, journaling; a string it returns stops the
+    branch there with that reason). Keeps every point reached when it has to stop, with
+    the reason. ``state`` resumes from a saved state.
+
+    Stops with ``closed_loop`` when the branch comes back onto a stretch it has already
+    traced, in the same direction (:func:`revisits`): with exact backlash the sampled
+    residual is only piecewise smooth, and at a non-smooth junction of solution curves
+    the continuation can enter a loop that it would otherwise circle until
+    ``max_points``.
+    """
     step = _arclength_step_jit
     direction = float(np.sign(lam_end - lam0))
     if state is None:
         state = _start_jit(param, y0, lam0, direction, settings)
     rows = [(np.asarray(state.y), float(state.lam), 0, False, np.nan,
              np.concatenate([np.asarray(state.ty), [float(state.tlam)]]), float(state.h))]
+    trace = _Trace(max_points, rows[0][0].size + 1)
+    trace.add(np.append(rows[0][0], rows[0][1]), rows[0][5])
     if on_point is not None:
         on_point(0, state)
     stop = "max_points"
@@ -369,11 +379,18 @@ def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Setti
                          bool(state.fold), float(state.fold_lam),
                          np.concatenate([np.asarray(state.ty), [float(state.tlam)]]),
                          float(state.h)))
-            if on_point is not None:
-                on_point(len(rows) - 1, state)
+            asked = on_point(len(rows) - 1, state) if on_point is not None else None
             if (float(state.lam) - lam_end) * direction >= 0:
                 stop = "reached_end"
                 break
+            if asked:
+                stop = asked
+                break
+            z = np.append(rows[-1][0], rows[-1][1])
+            if trace.revisits(z, rows[-1][5]):
+                stop = "closed_loop"
+                break
+            trace.add(z, rows[-1][5])
         elif float(state.h) < settings.min_step:
             stop = "step_too_small"
             break
@@ -381,6 +398,41 @@ def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Setti
     omegas = np.array([float(param.omega(l)) for l in lam])
     return Branch(y=np.stack(y), lam=lam, omega=omegas, steps=steps, fold=fold,
                   fold_lam=fold_lam, tangent=np.stack(tan), h=h, stop=stop)
+
+
+class _Trace:
+    """Accepted points ``z = (y, lambda)`` of a branch with their unit tangents and
+    arclength, for :meth:`revisits` (preallocated; ``capacity`` points of size ``size``)."""
+
+    def __init__(self, capacity: int, size: int):
+        self.z = np.empty((capacity, size))
+        self.t = np.empty((capacity, size))
+        self.s = np.zeros(capacity)  # arclength (sum of chords) from the first point
+        self.gap = np.zeros(capacity)  # chord to the neighbouring points, the larger
+        self.n = 0
+
+    def add(self, z, t) -> None:
+        if self.n:
+            chord = float(np.linalg.norm(z - self.z[self.n - 1]))
+            self.gap[self.n - 1] = max(self.gap[self.n - 1], chord)
+            self.gap[self.n] = chord
+            self.s[self.n] = self.s[self.n - 1] + chord
+        self.z[self.n], self.t[self.n] = z, t
+        self.n += 1
+
+    def revisits(self, z, t) -> bool:
+        """``z`` lies on an earlier stretch of the branch: closer to an earlier point than
+        0.6 of the chords there, with the tangent pointing the same way (cosine > 0.99),
+        after a path at least 20 such chords long (a loop, not the neighbourhood of a
+        fold, where the branch turns back close to itself)."""
+        n = self.n
+        if n < 2:
+            return False
+        s_now = self.s[n - 1] + float(np.linalg.norm(z - self.z[n - 1]))
+        d = np.sqrt(np.sum((self.z[:n] - z) ** 2, axis=1))
+        near = (d < 0.6 * self.gap[:n]) & (s_now - self.s[:n] > 20 * self.gap[:n]) & (
+            self.t[:n] @ t > 0.99)
+        return bool(np.any(near))
 
 
 _arclength_step_jit = jax.jit(arclength_step, static_argnums=(2,))

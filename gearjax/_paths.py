@@ -103,12 +103,22 @@ def leaf_selector(train: Train, path: str, flag: str = "--free") -> Leaf:
               f"({', '.join(ids)}), housing, couplings or gears")
 
 
-def continuous_paths(train: Train) -> list[str]:
+def continuous_paths(train: Train, gear: str | None = None, *, linear: bool = False
+                     ) -> list[str]:
     """Every continuous scalar path of ``train`` in file order (canonical spellings).
 
     Couplings appear once, by ``id`` when they have one, else by 0-based position;
     ``carrier_radius_mm`` only where the file sets it; planet angles from planet 2.
+
+    With ``gear``, only the paths that change that gear's assembled system: not the
+    other gears' torques, not clutches that gear leaves open, not ``housing.braked``
+    in a gear without brakes (``housing.free`` where every member is braked), not the
+    stiffness harmonics and phasing (contact ratios, planet angles, sun-ring and stage
+    phases) of a stage that does not turn in it, not a ``drag_torque`` that acts on no
+    member (every member the input, output, braked or at rest), and with ``linear``
+    (no backlash) not the backlash.
     """
+    keep = (lambda path: True) if gear is None else _affects(train, gear, linear)
     out = []
     for s in train.stages:
         f = f"{s.id}."
@@ -127,7 +137,41 @@ def continuous_paths(train: Train) -> list[str]:
         out.append(f"couplings.{c.id if c.id is not None else k}.stiffness")
     out += [f"housing.{k}" for k in HOUSING_KEYS]
     out += [f"gears.{g.name}.{k}" for g in train.gears for k in GEAR_KEYS]
-    return out
+    return [p for p in out if keep(p)]
+
+
+def _affects(train: Train, gear: str, linear: bool) -> Callable[[str], bool]:
+    """``path -> bool``: whether ``path`` enters the assembled system of ``gear``."""
+    from ._kinematics import kinematics
+    from ._train import member_paths
+
+    g = train.gear(gear)
+    kin = kinematics(train, g.name)
+    still = {s.id for s in kin.stages if not s.turning}
+    open_ = {f"couplings.{c.id if c.id is not None else k}.stiffness"
+             for k, c in enumerate(train.couplings) if not c.engaged(g.name)}
+    members = member_paths(train)
+    dragged = any(kin.speeds.get(p, 0) != 0 and p not in (g.input, g.output)
+                  and p not in g.brakes for p in members)
+    phasing = ("contact_ratio", "sun_ring_phase_deg", "stage_phase_deg", "planet_angles_deg")
+
+    def keep(path: str) -> bool:
+        parts = path.split(".")
+        if parts[0] == "gears":
+            return parts[1] == g.name and (parts[2] != "drag_torque" or dragged)
+        if path in open_:
+            return False
+        if path == "housing.braked":
+            return bool(g.brakes)
+        if path == "housing.free":
+            return len(set(g.brakes)) < len(members)
+        if parts[0] in still and parts[1] in phasing:
+            return False
+        if linear and parts[1:2] == ["half_backlash"]:
+            return False
+        return True
+
+    return keep
 
 
 def get_path(train: Train, path: str, flag: str = "--free") -> Float[Array, ""]:

@@ -1,12 +1,23 @@
-"""Figures: mode shapes (more plots join as solvers land). Matplotlib, no screen needed."""
+"""Figures: mode shapes, sweeps, solution points, verification; and redrawing a saved
+results file (:func:`plot_results`, ``gearjax plot``). Matplotlib, no screen needed."""
 
 from __future__ import annotations
 
+import json
 import math
+import pathlib
+import tomllib
+from collections.abc import Callable
 
 import numpy as np
 
+from ._errors import TrainError
 from ._modal import ModalResult
+
+WHAT = {"rms": ("rms_force", "RMS mesh force (N)"), "dlf": ("dlf", "dynamic load factor"),
+        "separation": ("separation", "share of period in separation"),
+        "torque": ("mean_torque", "mean transmitted torque (N m)")}
+"""``what`` of the response plots: the Dataset variable and its axis label."""
 
 
 def plot_mode_shapes(result: ModalResult, path: str, title: str = "", classes=("elastic",)):
@@ -54,19 +65,24 @@ def plot_sweep(ds, path: str, what: str = "rms", title: str = ""):
     period) or ``torque`` (mean transmitted torque, N m). One panel per stage and mesh
     side, the planets' curves overlaid; stable solid, unstable dashed, unknown dotted.
     """
-    var, label = {"rms": ("rms_force", "RMS mesh force (N)"), "dlf": ("dlf", "dynamic load factor"),
-                  "separation": ("separation", "share of period in separation"),
-                  "torque": ("mean_torque", "mean transmitted torque (N m)")}[what]
+    var, label = WHAT[what]
     f = np.asarray(ds["mesh_frequency_hz"]) / 1e3
     stable = np.asarray(ds["stable"]) if "stable" in ds else np.full(f.shape, -1)
+    branch = np.asarray(ds["branch"]) if "branch" in ds else np.zeros(f.shape, int)
     fig, axes, panels = _mesh_panels(ds, label)
     for ax, first, meshes in panels:
         for j in meshes:
             y = np.asarray(ds[var])[:, j]
-            for flag, style in ((1, "-"), (0, "--"), (-1, ":")):
-                yy = np.where(stable == flag, y, np.nan)
-                ax.plot(f, yy, style, lw=1.0, color=f"C{j % 10}",
-                        label=(f"planet {int(ds['planet'][j])}" if flag == 1 and first else None))
+            planet = int(ds["planet"][j])
+            for b in np.unique(branch):  # branches are not joined to each other
+                sel = branch == b
+                for flag, style in ((1, "-"), (0, "--"), (-1, ":")):
+                    on = stable[sel] == flag
+                    on[1:] |= stable[sel][:-1] == flag  # each run reaches the next point
+                    ax.plot(f[sel], np.where(on, y[sel], np.nan), style, lw=1.0,
+                            color=f"C{(planet - 1) % 10}",  # one colour per planet
+                            label=(f"planet {planet}" if flag == 1 and first and b == branch[0]
+                                   else None))
     _finish(fig, axes, ds, path, title or "frequency response (solid stable, dashed unstable)")
 
 
@@ -92,6 +108,7 @@ def _mesh_panels(ds, ylabel: str):
             sel = (np.asarray(ds["stage"]) == stage) & (np.asarray(ds["side"]) == side)
             ax.set_title(f"stage {stage}, {side}-planet meshes", fontsize=9)
             ax.set_ylabel(ylabel, fontsize=8)
+            ax.ticklabel_format(axis="y", useOffset=False)
             ax.grid(alpha=0.3)
             panels.append((ax, r == 0 and c == 0, np.where(sel)[0]))
     return fig, axes, panels
@@ -110,30 +127,33 @@ def _finish(fig, axes, ds, path, title: str) -> None:
     plt.close(fig)
 
 
-def plot_verify(hb, ni, path: str, curve=None, title: str = ""):
+def plot_verify(hb, ni, path: str, curve=None, title: str = "", what: str = "rms"):
     """Integration points (markers) over the harmonic-balance RMS mesh forces, as the
     paper's Figs 4 and 5.
 
     ``hb``, ``ni``: results Datasets at the same points (``VerifyResult.hb``, ``.ni``);
     ``curve``: an optional sweep Dataset drawn as the harmonic-balance line (otherwise
-    the line joins the ``hb`` points in frequency order). See :func:`plot_points`.
+    the line joins the ``hb`` points in frequency order); ``what`` as
+    :func:`plot_sweep`. See :func:`plot_points`.
     """
-    plot_points(ni, path, line=curve if curve is not None else hb,
+    plot_points(ni, path, line=curve if curve is not None else hb, what=what,
                 title=title or "harmonic balance (lines) and time integration (markers)")
 
 
-def plot_points(ds, path: str, line=None, title: str = ""):
-    """RMS mesh forces of solution points as markers against reference-stage mesh
+def plot_points(ds, path: str, line=None, title: str = "", what: str = "rms"):
+    """A response of solution points as markers against reference-stage mesh
     frequency, optionally over the lines of another results Dataset ``line``.
 
-    One panel per stage and mesh side, one colour per planet; open circles are
-    converged points, crosses points that did not converge (e.g. an integration that
-    did not settle to the base period). Meshes are matched by name.
+    ``what`` as :func:`plot_sweep` (default RMS mesh force). One panel per stage and
+    mesh side, one colour per planet; open circles are converged points, crosses
+    points that did not converge (e.g. an integration that did not settle to the base
+    period). Meshes are matched by name.
     """
+    var, ylabel = WHAT[what]
     f_pts = np.asarray(ds["mesh_frequency_hz"]) / 1e3
     settled = np.asarray(ds["converged"])
     names = np.asarray(ds["mesh"]).tolist()
-    fig, axes, panels = _mesh_panels(ds, "RMS mesh force (N)")
+    fig, axes, panels = _mesh_panels(ds, ylabel)
     for ax, first, meshes in panels:
         for j in meshes:
             color = f"C{(int(ds['planet'][j]) - 1) % 10}"  # one colour per planet
@@ -142,10 +162,108 @@ def plot_points(ds, path: str, line=None, title: str = ""):
                 f_line = np.asarray(line["mesh_frequency_hz"]) / 1e3
                 order = np.argsort(f_line)
                 k = np.asarray(line["mesh"]).tolist().index(names[j])
-                ax.plot(f_line[order], np.asarray(line["rms_force"])[order, k], "-", lw=1.0,
+                ax.plot(f_line[order], np.asarray(line[var])[order, k], "-", lw=1.0,
                         color=color, label=label)
                 label = None
-            y = np.asarray(ds["rms_force"])[:, j]
+            y = np.asarray(ds[var])[:, j]
             ax.plot(f_pts[settled], y[settled], "o", mfc="none", ms=6, color=color, label=label)
             ax.plot(f_pts[~settled], y[~settled], "x", ms=6, color=color)
-    _finish(fig, axes, ds, path, title or "RMS mesh forces (open circles converged, crosses not)")
+    _finish(fig, axes, ds, path,
+            title or f"{ylabel} (open circles converged, crosses not)")
+
+
+# ------------------------------------------------------------------ saved results
+
+
+def plot_results(results, out=None, what: str = "rms") -> tuple[str, pathlib.Path]:
+    """Redraw a results file written by ``--out`` (NetCDF) without recomputing.
+
+    The figure depends on the kind of result, the file's ``kind`` attribute (files
+    without one: ``simulate`` when they hold integration statistics, else ``sweep``):
+    :data:`RESULT_PLOTS` maps each kind to its drawing function (new kinds register
+    there). ``what``: ``rms``, ``dlf``, ``separation`` or ``torque`` (:func:`plot_sweep`);
+    ``out``: the figure (default: ``results`` with the suffix ``.png``).
+
+    **Returns:** ``(kind, figure path)``. **Raises:** ``TrainError`` (one line naming the
+    file) for a missing, unreadable or non-gearjax file, or a kind with no figure.
+    """
+    path = pathlib.Path(results)
+    if what not in WHAT:
+        raise TrainError(f"command line: --what = {what!r}: must be one of {', '.join(WHAT)}")
+    ds = _open_results(path)
+    kind = result_kind(ds)
+    if kind not in RESULT_PLOTS:
+        raise TrainError(f"{path}: kind = {kind!r}: gearjax plot cannot draw this kind of "
+                         f"result; it draws {', '.join(RESULT_PLOTS)}")
+    fig = pathlib.Path(out) if out else path.with_suffix(".png")
+    if fig.resolve() == path.resolve():
+        raise TrainError(f"command line: --out = {str(fig)!r}: would overwrite the results file")
+    RESULT_PLOTS[kind](path, ds, fig, what)
+    return kind, fig
+
+
+def result_kind(ds) -> str | None:
+    """The kind of a results Dataset: its ``kind`` attribute, or for files written
+    before it existed ``simulate`` (integration statistics present) or ``sweep``."""
+    kind = ds.attrs.get("kind")
+    if kind is None and "mesh_frequency_hz" in ds:
+        kind = "simulate" if "num_steps" in ds else "sweep"
+    return None if kind is None else str(kind)
+
+
+def _open_results(path: pathlib.Path):
+    import xarray as xr
+
+    if not path.is_file():
+        raise TrainError(f"{path}: no such results file")
+    if path.suffix.lower() != ".nc":
+        raise TrainError(f"{path}: only NetCDF results (.nc) can be redrawn; write them with "
+                         "--out FILE.nc")
+    try:
+        ds = xr.load_dataset(path, engine="h5netcdf")
+    except Exception as e:  # noqa: BLE001  h5py, netCDF and xarray raise many kinds
+        reason = " ".join(str(e).split()) or type(e).__name__
+        raise TrainError(f"{path}: not a NetCDF results file ({reason[:120]})") from None
+    if "gearjax_version" not in ds.attrs:
+        raise TrainError(f"{path}: not a gearjax results file (no gearjax_version attribute)")
+    return ds
+
+
+def _title(ds, what: str, kind: str) -> str:
+    try:
+        name = tomllib.loads(ds.attrs.get("train_toml", "")).get("name", "")
+    except tomllib.TOMLDecodeError:
+        name = ""
+    try:
+        linear = json.loads(ds.attrs.get("solver", "{}")).get("linear")
+    except ValueError:
+        linear = None
+    model = {True: ", linear", False: ", backlash"}.get(linear, "")
+    head = f"{name}\n" if name else ""
+    return f"{head}gear {ds.attrs.get('gear', '?')}{model}, {kind}: {WHAT[what][1]}"
+
+
+def _redraw_sweep(path, ds, fig, what):
+    plot_sweep(ds, fig, what=what,
+               title=_title(ds, what, "sweep") + " (solid stable, dashed unstable)")
+
+
+def _redraw_simulate(path, ds, fig, what):
+    plot_points(ds, fig, what=what, title=_title(ds, what, "time integration")
+                + " (circles converged, crosses not)")
+
+
+def _redraw_verify(path, ds, fig, what):
+    from ._verify import load_verify
+
+    _, hb, ni = load_verify(path)
+    plot_verify(hb, ni, fig, what=what, title=_title(hb, what, "verification")
+                + "\nlines: harmonic balance, markers: time integration")
+
+
+RESULT_PLOTS: dict[str, Callable] = {
+    "sweep": _redraw_sweep,
+    "simulate": _redraw_simulate,
+    "verify": _redraw_verify,
+}
+"""Drawing function per result kind: ``f(results_path, dataset, figure_path, what)``."""

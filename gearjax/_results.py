@@ -20,7 +20,9 @@ Layout (interface.md, Results files):
 
 Every variable has a ``units`` attribute. Global attributes: ``train_toml`` (the
 train file text), ``gear``, ``solver`` (settings as a JSON string),
-``gearjax_version``, ``created`` (ISO 8601, UTC), plus any the caller adds.
+``gearjax_version``, ``created`` (ISO 8601, UTC), plus any the caller adds; sweeps
+and simulations add ``kind`` (``"sweep"``, ``"simulate"``), which ``gearjax plot``
+dispatches on (``gearjax._plot.RESULT_PLOTS``).
 
 CSV has one row per point and mesh with the columns ``point, mesh, stage, side,
 planet, mesh_frequency_hz, stage_mesh_frequency_hz`` (the mesh's own stage),

@@ -348,7 +348,8 @@ class _GearPoint:
         self.ref = _reference_stage(train, kin, stage)
         self.mu_ref = mu[train.stage_ids.index(self.ref)]
         self.gear, self.train, self.linear = g.name, train, linear
-        self.paths = tuple(leaf.path for leaf in check_paths(train, paths))
+        self.paths = tuple(leaf.path for leaf in check_paths(train, paths, gear=g.name,
+                                                              linear=linear))
         if harmonics is not None and (int(harmonics) != harmonics or harmonics < 1):
             raise fail("command line", "--harmonics", harmonics, "must be an integer >= 1")
         self.family = GearFamily.of(train, self.paths, g.name, linear)
@@ -400,10 +401,11 @@ def _responses_jit(problem, X, omega):
     return mesh_responses(problem, X, omega, static_mesh_forces(problem.system))
 
 
-def check_paths(train: Train, paths: Sequence[str] | None, flag: str = "--vary"
-                ) -> tuple[Leaf, ...]:
-    """Resolve ``paths`` (default: :func:`~gearjax.continuous_paths`), each once."""
-    paths = continuous_paths(train) if paths is None else (
+def check_paths(train: Train, paths: Sequence[str] | None, flag: str = "--vary", *,
+                gear: str | None = None, linear: bool = False) -> tuple[Leaf, ...]:
+    """Resolve ``paths``, each once; ``None``: :func:`~gearjax.continuous_paths` of
+    ``gear`` (the paths that change that gear's system; ``linear``: no backlash)."""
+    paths = continuous_paths(train, gear, linear=linear) if paths is None else (
         (paths,) if isinstance(paths, str) else tuple(paths))
     if not paths:
         raise fail(train.source, flag, [], "at least one parameter path is required")
@@ -450,8 +452,9 @@ def sensitivity(
     **Arguments:** ``at_hz``: reference-stage mesh frequency (Hz), as in ``sweep``;
     ``response``: ``rms`` (RMS alternating force, N), ``max`` (peak ``|F|``, N) or
     ``dlf`` (dynamic load factor); ``mesh``: mesh name (``1.sp1``; default: the mesh
-    with the largest response); ``paths``: TOML paths (default: every continuous path,
-    :func:`~gearjax.continuous_paths`); ``stage``, ``linear``: as ``sweep``;
+    with the largest response); ``paths``: TOML paths (default: every continuous path
+    that changes the gear's system, :func:`~gearjax.continuous_paths` of the gear);
+    ``stage``, ``linear``: as ``sweep``;
     ``harmonics``: K (default: the sweep's rule at ``at_hz``); ``fold_tol``: the fold
     test on ``min |mu - 1|`` (:func:`point_status`, :data:`FOLD_TOL`).
 

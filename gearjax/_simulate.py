@@ -267,6 +267,6 @@ def simulate_gear(
         progress(f"simulate: {len(f_hz)} points in {seconds:.1f} s")
     solver = {**solver_settings(settings), "linear": linear, "reference_stage": case.stage}
     return trajectory_dataset(case, f_hz, tr, solver, attrs={
-        "mode": "sweep" if is_sweep else "points",
+        "kind": "simulate", "mode": "sweep" if is_sweep else "points",
         "start": "static contact" if x0 is None else "given",
         "seconds": seconds, "command": " ".join(sys.argv)})

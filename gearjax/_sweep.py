@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import pathlib
 import sys
 import time
 from collections.abc import Callable
@@ -28,9 +29,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import _continuation, _hb
+from . import _continuation, _hb, _journal
 from ._assembly import assemble
-from ._errors import fail
+from ._errors import TrainError, fail
 from ._kinematics import kinematics, require_base
 from ._responses import mesh_responses, static_mesh_forces
 from ._results import mesh_coordinates, sweep_dataset
@@ -42,6 +43,16 @@ RESPONSE_CUTOFF_HZ = 20e3
 """Response content the default harmonics must reach (covers the modes the meshes drive)."""
 
 MAX_DEFAULT_HARMONICS = 64
+
+MAX_DETOUR = 150
+"""Points a continuation may go without passing its furthest frequency before the sweep
+restarts beyond it (about the length of a fold pair of the paper case: up to a fold,
+back along the unstable branch to the next)."""
+
+MAX_RESTARTS = 100
+
+RESTART_STOPS = ("closed_loop", "detour", "step_too_small", "nonfinite")
+"""Continuation stops after which a sweep restarts on a new branch."""
 
 
 def harmonics_rule(base_hz: float, min_harmonics: int, eta: int = 1,
@@ -62,13 +73,15 @@ def harmonics_rule(base_hz: float, min_harmonics: int, eta: int = 1,
 class SweepResult:
     """A finished (or stopped) sweep: ``dataset`` (xarray, interface.md layout),
     ``folds_hz`` (located folds, reference-stage Hz), ``stop`` (why it ended),
-    ``segments`` (``(from_hz, to_hz, K)`` in sweep order), ``seconds``."""
+    ``segments`` (``(from_hz, to_hz, K)`` in sweep order), ``seconds``, ``restarts``
+    (``{"from_hz", "at_hz", "reason"}``: where a branch was left and the next begun)."""
 
     dataset: object
     folds_hz: tuple[float, ...]
     stop: str
     segments: tuple[tuple[float, float, int], ...]
     seconds: float
+    restarts: tuple[dict, ...] = ()
 
 
 def sweep(
@@ -84,8 +97,11 @@ def sweep(
     max_step_hz: float | None = None,
     points: int = 300,
     max_points: int = 3000,
+    max_detour: int = MAX_DETOUR,
     smoothing: float = 0.0,
     progress: Callable[[int, float], None] | None = None,
+    journal=None,
+    resume: bool = False,
 ) -> SweepResult:
     """Frequency response of ``gear`` from ``from_hz`` to ``to_hz`` (reference-stage mesh Hz).
 
@@ -93,9 +109,30 @@ def sweep(
     ``linear``: drop the backlash; ``harmonics``: fixed K (default: frequency-dependent,
     :func:`harmonics_rule`); ``eta``: sub-harmonic index; ``max_step_hz``: largest
     frequency step; ``points``: grid size of a linear sweep; ``max_points``: cap on a
-    continuation; ``smoothing``: corner rounding of the backlash relative to it (0: exact
+    continuation; ``max_detour``: points a branch may go without passing the furthest
+    frequency it reached before the sweep restarts beyond it (see below); ``smoothing``: corner rounding of the backlash relative to it (0: exact
     piecewise-linear, see :func:`gearjax._mesh.backlash`); ``progress(points_done,
     frequency_hz)``: called per point.
+
+    ``journal``: a file (e.g. ``RESULTS.nc.journal``, :func:`gearjax._journal.journal_path`)
+    where every finished point (continuation) or segment (linear grid) is appended as it
+    is found, with what the continuation needs to go on (scaled solution, tangent, step,
+    parameter, harmonics, segment); ``resume``: continue the run that the existing
+    ``journal`` holds instead of starting afresh (nothing is recomputed; the result is
+    that of an uninterrupted run). Without ``resume`` an existing journal is refused (it
+    is an interrupted run's work); a journal of another run (train text, gear, flags) is
+    refused naming the field. The caller deletes the journal once it has saved the
+    results. Responses and stability are computed at the end from the solutions.
+
+    **Branch restarts.** A continuation follows one solution branch wherever it goes.
+    Where the branch closes on itself (``closed_loop``), wanders back and forth for
+    ``max_detour`` points without passing the furthest frequency it reached
+    (``detour``: with tooth separation on many meshes the paper case has intricate
+    multi-valued regions), or cannot go on (``step_too_small``, ``nonfinite``), the
+    sweep keeps every point of it and starts a new branch from a fresh solution
+    (:func:`start_point`) a small step beyond that furthest frequency, as a sweep on a
+    test rig jumps. Each point carries its ``branch`` number and ``restarts`` lists
+    where and why, so the frequencies between are known to be unexplored.
 
     **Raises:** ``TrainError`` for a gear where no mesh turns, an impractical ``mu``,
     an unknown stage, or backlash on an unloaded stage without ``drag_torque``.
@@ -132,52 +169,108 @@ def sweep(
               "segments": [list(s) for s in segments], "reference_stage": ref,
               "max_step_hz": max_step_hz, "cutoff_hz": RESPONSE_CUTOFF_HZ,
               "smoothing": smoothing}
-    rows: list[dict] = []
+    run = {"train": dumps_train(train), "--gear": g.name, "--stage": ref,
+           "--from": float(from_hz), "--to": float(to_hz), "--linear": bool(linear),
+           "--harmonics": None if harmonics is None else int(harmonics), "--eta": int(eta),
+           "--max-step": None if max_step_hz is None else float(max_step_hz),
+           "--smoothing": float(smoothing)}
+    if linear:
+        run["--points"] = int(points)
+    else:
+        run["--max-points"] = int(max_points)
+    log = _SweepLog.open(journal, run, resume)
+    omega_ref = to_omega(from_hz)  # continuation parameter: lambda = Omega / omega_ref
+    problems = []
     folds: list[float] = []
+    restarts: list[dict] = []
+    fresh = {0}  # segments that start a new branch (the others continue the one before)
     stop = "reached_end"
-    y = None
-    done = 0
-    for f_a, f_b, K in segments:
-        problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=K, eta=eta,
-                                                             smoothing=smoothing))
+    previous = None  # (K, y, lambda) of the last point of the segment before
+    done = 0  # points kept so far (a segment's first point repeats the previous last)
+    segments = list(segments)
+    j = -1
+    try:
+        while j + 1 < len(segments):
+            j += 1
+            f_a, f_b, K = segments[j]
+            problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=K, eta=eta,
+                                                                 smoothing=smoothing))
+            problems.append(problem)
+            if linear:
+                if log.batch(j) is None:
+                    n = max(2, round(points * abs(f_b - f_a) / abs(to_hz - from_hz)))
+                    last = (f_b == segments[-1][1])
+                    freqs = np.linspace(f_a, f_b, n, endpoint=last)
+                    omegas = jnp.asarray([to_omega(f) for f in freqs])
+                    sols = _solve_points(problem, omegas)
+                    log.add({"type": "batch", "segment": j, "K": K,
+                             "omega": np.asarray(omegas, float), "X": np.asarray(sols.X, float),
+                             "result": np.asarray(sols.result, np.int64)})
+                batch = log.batch(j)
+                done += len(batch["omega"])
+                if progress:
+                    progress(done, float(batch["omega"][-1]) * mu_ref / (2 * math.pi))
+                continue
+            param = _continuation.FrequencyParameter(problem=problem,
+                                                     omega_ref=jnp.asarray(omega_ref))
+            lam_a, lam_b = to_omega(f_a) / omega_ref, to_omega(f_b) / omega_ref
+            if log.end(j) is None:
+                settings = _settings(max_step_hz, to_hz - from_hz, from_hz, mu_ref)
+                seg_stop = _continue_segment(
+                    log, j, K, param, None if j in fresh else previous, lam_a, lam_b,
+                    settings, cap=max_points - done, f_a=f_a, f_ref=from_hz,
+                    max_detour=max_detour,
+                    progress=(lambda i, lam, start=done: progress(start + i + 1, lam * from_hz))
+                    if progress else None)
+                log.add({"type": "end", "segment": j, "stop": seg_stop})
+            seg_stop = log.end(j)["stop"]
+            pts = log.points(j)
+            if pts:
+                folds += [p["fold_lam"] * from_hz for p in pts if p["fold"]]
+                done += len(pts) - (1 if done and j not in fresh else 0)
+                previous = (K, pts[-1]["y"], pts[-1]["lam"])
+            restartable = seg_stop in RESTART_STOPS or seg_stop.startswith("no converged")
+            if restartable and len(restarts) < MAX_RESTARTS and done < max_points:
+                lams = [lam_a] + [p["lam"] for p in pts]
+                reached = (max if to_hz > from_hz else min)(lams) * from_hz
+                at = reached + math.copysign(_restart_step(max_step_hz, to_hz - from_hz),
+                                             to_hz - from_hz)
+                restarts.append({"from_hz": float(reached), "at_hz": float(at),
+                                 "reason": seg_stop})
+                if (at - f_b) * (to_hz - from_hz) < 0:
+                    segments.insert(j + 1, (float(at), f_b, K))
+                elif j + 1 < len(segments):
+                    restarts[-1]["at_hz"] = segments[j + 1][0]
+                else:
+                    restarts.pop()
+                    stop = seg_stop
+                    break
+                fresh.add(j + 1)
+                continue
+            if seg_stop != "reached_end":
+                stop = seg_stop
+                break
+    finally:
+        log.close()
+    rows: list[dict] = []
+    branch = 0
+    for j, problem in enumerate(problems):
         if linear:
-            n = max(2, round(points * abs(f_b - f_a) / abs(to_hz - from_hz)))
-            last = (f_b == segments[-1][1])
-            freqs = np.linspace(f_a, f_b, n, endpoint=last)
-            omegas = jnp.asarray([to_omega(f) for f in freqs])
-            sols = _solve_points(problem, omegas)
-            ok = np.asarray(sols.result)
-            rows.append(_point_rows(problem, sols.X, omegas, ok, F_static))
-            done += n
-            if progress:
-                progress(done, float(freqs[-1]))
+            batch = log.batch(j)
+            rows.append(_point_rows(problem, jnp.asarray(batch["X"]),
+                                    jnp.asarray(batch["omega"]), batch["result"], F_static))
+            rows[-1]["branch"] = np.zeros(len(batch["omega"]), int)
             continue
-        omega_ref = to_omega(from_hz)
-        param = _continuation.FrequencyParameter(problem=problem, omega_ref=jnp.asarray(omega_ref))
-        lam_a, lam_b = to_omega(f_a) / omega_ref, to_omega(f_b) / omega_ref
-        y, code = _enter_segment(problem, param, y, lam_a, omega_ref)
-        if code != _hb.CONVERGED:
-            stop = f"no converged start at {f_a:.1f} Hz ({_hb.RESULTS[code]})"
-            break
-        settings = _settings(max_step_hz, to_hz - from_hz, from_hz, mu_ref)
-
-        def on_point(i, state, f_ref=from_hz, start=done):
-            if progress:
-                progress(start + i + 1, float(state.lam) * f_ref)
-
-        branch = _continuation.continue_branch(param, y, lam_a, lam_b, settings,
-                                               max_points=max_points - done, on_point=on_point)
-        omegas = jnp.asarray(branch.omega)
-        Xs = jnp.asarray(branch.y).reshape((-1,) + problem.shape) * problem.x_scale
-        skip = 1 if rows else 0  # the segment's first point repeats the previous last
-        rows.append(_point_rows(problem, Xs[skip:], omegas[skip:],
-                                np.zeros(len(omegas) - skip, int), F_static))
-        folds += [float(lam) * from_hz for lam in branch.fold_lam[branch.fold]]
-        done += len(omegas) - skip
-        y = (K, branch.y[-1], branch.lam[-1])
-        if branch.stop != "reached_end":
-            stop = branch.stop
-            break
+        # a segment's first point repeats the last of the one before, on the same branch
+        pts = log.points(j)[1 if rows and j not in fresh else 0:]
+        branch += j in fresh and j > 0
+        if not pts:
+            continue
+        Xs = jnp.asarray(np.stack([p["y"] for p in pts])).reshape(
+            (-1,) + problem.shape) * problem.x_scale
+        omegas = jnp.asarray(np.array([p["lam"] for p in pts]) * omega_ref)
+        rows.append(_point_rows(problem, Xs, omegas, np.zeros(len(pts), int), F_static))
+        rows[-1]["branch"] = np.full(len(pts), branch)
     if not rows:
         raise RuntimeError(f"sweep produced no point: {stop}")
     data = {k: np.concatenate([r[k] for r in rows]) for k in rows[0] if k != "responses"}
@@ -186,7 +279,8 @@ def sweep(
     omegas = data["omega"]
     f_ref = omegas * mu_ref / (2 * math.pi)
     stage_hz = np.outer(omegas / (2 * math.pi), np.asarray(mu, float))
-    bif = bifurcations(f_ref, data["stable"], data["multipliers"], data["excluded"])
+    bif = bifurcations(f_ref, data["stable"], data["multipliers"], data["excluded"],
+                       data["branch"])
     coords = mesh_coordinates(system)
     ds = sweep_dataset(
         data["responses"], **coords,
@@ -200,13 +294,16 @@ def sweep(
         train_toml=dumps_train(train),
         gear=g.name,
         solver=solver,
-        attrs={"folds_hz": folds, "stop": stop, "reference_stage": ref,
-               "bifurcations": bif, "command": " ".join(sys.argv)},
+        attrs={"kind": "sweep", "folds_hz": folds, "stop": stop, "reference_stage": ref,
+               "bifurcations": bif, "restarts": restarts, "command": " ".join(sys.argv)},
     )
+    ds["branch"] = ("point", data["branch"], {
+        "units": "1", "long_name": "solution branch (a new one after each restart)"})
     ds["max_multiplier"] = ("point", data["max_multiplier"], {
         "units": "1", "long_name": "largest Floquet multiplier modulus (rigid-body excluded)"})
     return SweepResult(dataset=ds, folds_hz=tuple(folds), stop=stop,
-                       segments=tuple(segments), seconds=time.perf_counter() - t_start)
+                       segments=tuple(segments), seconds=time.perf_counter() - t_start,
+                       restarts=tuple(restarts))
 
 
 # ---------------------------------------------------------------------------- parts
@@ -222,6 +319,191 @@ def _reference_stage(train, kin, stage):
         raise fail(train.source, "--stage", stage, f"stage {stage!r} does not turn in gear "
                    f"{kin.gear!r}: its mesh frequency is 0")
     return stage
+
+
+class _SweepLog:
+    """A sweep's finished work: records in memory and, with a journal, appended to it
+    (``_journal``) as they are found. Records: ``{"type": "point", "segment", "i", "K",
+    "y", "lam", "ty", "tlam", "h", "steps", "fold", "fold_lam"}`` per continuation
+    point, ``{"type": "end", "segment", "stop"}`` when a segment ends, ``{"type":
+    "batch", "segment", "K", "omega", "X", "result"}`` per linear segment."""
+
+    def __init__(self, records: list[dict], writer=None):
+        self._writer = writer
+        self._points: dict[int, list[dict]] = {}
+        self._other: dict[tuple[str, int], dict] = {}
+        for n, rec in enumerate(records):
+            self._index(rec, writer.path if writer else None, n)
+
+    @classmethod
+    def open(cls, journal, run: dict, resume: bool) -> _SweepLog:
+        if journal is None:
+            if resume:
+                raise fail("command line", "--resume", True,
+                           "needs a journal to resume from (the command line keeps it next "
+                           "to --out FILE, as FILE.journal)")
+            return cls([])
+        path = pathlib.Path(journal)
+        head = _journal.header("sweep", run)
+        if path.exists():
+            if not resume:
+                raise TrainError(
+                    f"{path}: a journal of an interrupted run is there: add --resume to "
+                    "continue it, or delete it to start afresh")
+            found, records, size = _journal.read(path)
+            if found is not None:
+                _journal.check(path, found, head)
+                return cls(records, _journal.Writer.append_to(path, size))
+        if resume:
+            print(f"gearjax: {path}: no journal to resume; starting from the beginning",
+                  file=sys.stderr, flush=True)
+        return cls([], _journal.Writer.create(path, head))
+
+    def _index(self, rec: dict, path, n: int) -> None:
+        kind, j = rec.get("type"), rec.get("segment")
+        if kind == "point":
+            pts = self._points.setdefault(j, [])
+            if rec.get("i") != len(pts) or ("end", j) in self._other:
+                raise fail(str(path), f"record {n + 1}", f"segment {j} point {rec.get('i')}",
+                           f"out of order (expected point {len(pts)}): the journal was "
+                           "changed after it was written; delete it to start afresh")
+            pts.append(rec)
+        elif kind in ("end", "batch"):
+            self._other[(kind, j)] = rec
+        else:
+            raise fail(str(path), f"record {n + 1}", kind, "is not a sweep record")
+
+    def add(self, rec: dict) -> None:
+        if self._writer is not None:
+            self._writer.append(rec)
+        self._index(rec, self._writer.path if self._writer else None, -1)
+
+    def points(self, j: int) -> list[dict]:
+        return self._points.get(j, [])
+
+    def end(self, j: int) -> dict | None:
+        return self._other.get(("end", j))
+
+    def batch(self, j: int) -> dict | None:
+        return self._other.get(("batch", j))
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+
+
+def _continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap, f_a, f_ref,
+                      progress, max_detour=MAX_DETOUR):
+    """Continue segment ``j`` from ``lam_a`` to ``lam_b`` (at most ``cap`` points), or the
+    rest of it after the points ``log`` holds; every point goes to ``log``. The resumed
+    state is the saved point with its tangent and step, and the factors of its bordered
+    Jacobian rebuilt as the continuation built them (last row: the tangent before), so
+    the points that follow are those of an uninterrupted run. **Returns:** why the
+    segment stopped (``_continuation.STOP_REASONS``, or no converged start)."""
+    have = log.points(j)
+    offset = max(len(have) - 1, 0)
+    direction = float(np.sign(lam_b - lam_a))
+    # a resumed continuation only knows the points from where it resumes; the
+    # closed-loop check of continue_branch compares with every point of the segment,
+    # so the journaled ones are checked here too
+    trace = _segment_trace(have, cap) if have else None
+    # the furthest lambda reached and the points since (detour check), over saved points too
+    front = {"lam": lam_a, "since": 0}
+
+    def detour(lam):
+        if (lam - front["lam"]) * direction > 0:
+            front["lam"], front["since"] = lam, 0
+        else:
+            front["since"] += 1
+        return front["since"] >= max_detour
+
+    for p in have:
+        detoured = detour(p["lam"])
+
+    def on_point(i, state):
+        if i == 0 and have:
+            return None  # the saved point the continuation resumes from
+        fold_lam = float(state.fold_lam)
+        y, lam = np.asarray(state.y, float), float(state.lam)
+        t = np.concatenate([np.asarray(state.ty), [float(state.tlam)]])
+        log.add({"type": "point", "segment": j, "i": offset + i, "K": K, "y": y, "lam": lam,
+                 "ty": t[:-1], "tlam": float(t[-1]), "h": float(state.h),
+                 "steps": int(state.steps), "fold": bool(state.fold),
+                 "fold_lam": fold_lam if math.isfinite(fold_lam) else None})
+        if progress:
+            progress(offset + i, lam)
+        if trace is not None and (lam - lam_b) * direction < 0:
+            z = np.append(y, lam)
+            if trace.revisits(z, t):
+                raise _ClosedLoop
+            trace.add(z, t)
+        return "detour" if detour(lam) and (lam - lam_b) * direction < 0 else None
+
+    if not have:
+        y, code = _enter_segment(param.problem, param, previous, lam_a, float(param.omega_ref))
+        if code != _hb.CONVERGED:
+            return f"no converged start at {f_a:.1f} Hz ({_hb.RESULTS[code]})"
+        return _continuation.continue_branch(param, y, lam_a, lam_b, settings, max_points=cap,
+                                             on_point=on_point).stop
+    last = have[-1]
+    if last["K"] != K:
+        raise fail(None, "journal", last["K"], f"segment {j} has K = {K} in this run")
+    # why continue_branch stopped after the last saved point, in its order of checks
+    if (last["lam"] - lam_b) * direction >= 0:
+        return "reached_end"
+    if trace is not None and trace.closed:
+        return "closed_loop"
+    if detoured:
+        return "detour"
+    if len(have) >= cap:
+        return "max_points"
+    # one saved point: the start state is rebuilt from it exactly as it was first built
+    state = None if len(have) == 1 else _arc_state(
+        param, jnp.asarray(last["y"]), jnp.asarray(last["lam"], float),
+        jnp.asarray(last["ty"]), jnp.asarray(last["tlam"], float),
+        jnp.asarray(last["h"], float), jnp.asarray(have[-2]["ty"]),
+        jnp.asarray(have[-2]["tlam"], float))
+    try:
+        return _continuation.continue_branch(param, jnp.asarray(last["y"]), lam_a, lam_b,
+                                             settings, max_points=cap - len(have) + 1,
+                                             on_point=on_point, state=state).stop
+    except _ClosedLoop:
+        return "closed_loop"
+
+
+class _ClosedLoop(Exception):
+    """A resumed segment came back onto a stretch traced before it was interrupted."""
+
+
+def _segment_trace(have, cap):
+    """The closed-loop trace of ``continue_branch`` (``_continuation._Trace``, where the
+    continuation has one) over the saved points ``have`` of a segment; ``.closed``: the
+    last saved point already closed the loop. ``None`` without such a check."""
+    cls = getattr(_continuation, "_Trace", None)
+    if cls is None:
+        return None
+    trace = cls(max(cap, len(have)), have[0]["y"].size + 1)
+    trace.closed = False
+    for k, p in enumerate(have):
+        z, t = np.append(p["y"], p["lam"]), np.append(p["ty"], p["tlam"])
+        if k and trace.revisits(z, t):
+            trace.closed = True
+            break
+        trace.add(z, t)
+    return trace
+
+
+@jax.jit
+def _arc_state(param, y, lam, ty, tlam, h, ty_before, tlam_before):
+    """The continuation state at an accepted point ``(y, lam)`` with tangent ``(ty, tlam)``
+    and next step ``h``: as ``arclength_step`` leaves it, with the bordered Jacobian
+    factorised with the tangent of the point before in its last row (the chord corrector
+    of the next step reuses those factors)."""
+    _, _, lu, piv = _continuation._tangent_lu(param, y, lam, ty_before, tlam_before)
+    return _continuation.ArcState(
+        y=y, lam=lam, ty=ty, tlam=tlam, h=h, accepted=jnp.asarray(True),
+        fold=jnp.asarray(False), fold_lam=jnp.asarray(jnp.nan), steps=jnp.asarray(0),
+        lu=lu, piv=piv)
 
 
 def _check_unloaded(train, g, kin, system):
@@ -254,6 +536,12 @@ def _segments(from_hz, to_hz, mu_ref, min_k, eta, fixed):
     segs[0] = (float(from_hz), segs[0][1], segs[0][2])
     segs[-1] = (segs[-1][0], float(to_hz), segs[-1][2])
     return segs
+
+
+def _restart_step(max_step_hz, span_hz) -> float:
+    """Frequency step (Hz, > 0) from the furthest point of a branch to the next branch's
+    start: a quarter of the largest continuation step."""
+    return 0.25 * (max_step_hz or abs(span_hz) / 100)
 
 
 def _settings(max_step_hz, span_hz, f_ref, mu_ref):
@@ -314,24 +602,43 @@ def _backlash_homotopy(problem, omega):
     return sol
 
 
+POST_CHUNK = 32
+"""Points per compiled call of the post-processing (responses + Floquet): bounds its
+memory (the monodromy of one point at K = 64 holds a few MB per step chunk)."""
+
+
 def _point_rows(problem, Xs, omegas, results, F_static):
-    """Responses and stability of a batch of solutions (one compiled call per segment)."""
-    resp, stab = _batch_post(problem, Xs, omegas, F_static)
+    """Responses and stability of a batch of solutions, in chunks of :data:`POST_CHUNK`
+    points (the last padded by repeating its final point: one compilation per segment)."""
+    P = len(omegas)
+    pad = -P % POST_CHUNK if P > POST_CHUNK else 0
+    Xs, omegas_p = jnp.asarray(Xs), jnp.asarray(omegas)
+    if pad:
+        Xs = jnp.concatenate([Xs, jnp.repeat(Xs[-1:], pad, axis=0)])
+        omegas_p = jnp.concatenate([omegas_p, jnp.repeat(omegas_p[-1:], pad)])
+    size = max(min(P, POST_CHUNK), 1)
+    parts = [_batch_post(problem, Xs[i:i + size], omegas_p[i:i + size], F_static)
+             for i in range(0, max(P + pad, 1), size)]
+    resp, stab = jax.tree.map(lambda *a: np.concatenate(a)[:P], *parts)
     return {"responses": resp, "omega": np.asarray(omegas), "result": np.asarray(results),
             "stable": np.asarray(stab.stable), "max_multiplier": np.asarray(stab.max_abs),
             "multipliers": np.asarray(stab.multipliers), "excluded": np.asarray(stab.excluded)}
 
 
-def bifurcations(f_hz, stable, multipliers, excluded) -> list[dict]:
-    """Where stability changes between neighbouring points, and how (interface: a list of
-    ``{"mesh_frequency_hz", "kind"}``, the frequency the midpoint of the two points).
+def bifurcations(f_hz, stable, multipliers, excluded, branch=None) -> list[dict]:
+    """Where stability changes between neighbouring points of one branch, and how
+    (interface: a list of ``{"mesh_frequency_hz", "kind"}``, the frequency the midpoint
+    of the two points).
 
     ``kind`` is from :func:`~gearjax._stability.bifurcation_kind`: ``fold``,
     ``period_doubling`` or ``neimark_sacker`` (``None`` where no multiplier left the unit
     circle, e.g. a change in the excluded rigid-body set).
     """
     out = []
-    for i in np.flatnonzero(np.asarray(stable[1:]) != np.asarray(stable[:-1])):
+    change = np.asarray(stable[1:]) != np.asarray(stable[:-1])
+    if branch is not None:
+        change &= np.asarray(branch[1:]) == np.asarray(branch[:-1])
+    for i in np.flatnonzero(change):
         kind = bifurcation_kind(multipliers[i][~excluded[i]], multipliers[i + 1][~excluded[i + 1]])
         out.append({"mesh_frequency_hz": float((f_hz[i] + f_hz[i + 1]) / 2), "kind": kind})
     return out
@@ -371,6 +678,7 @@ def summary_json(result: SweepResult) -> dict:
         "stop": result.stop,
         "folds_hz": list(result.folds_hz),
         "bifurcations": json.loads(ds.attrs.get("bifurcations", "[]")),
+        "restarts": list(result.restarts),
         "segments": [list(s) for s in result.segments],
         "seconds": result.seconds,
         "points": points_json(ds),

@@ -92,17 +92,52 @@ def geometry_warnings(train: Train) -> list[str]:
     return out
 
 
-def _check_overlap(train: Train, s) -> None:
-    psi = np.deg2rad(np.asarray(s.planet_angles_deg))
-    rc = float(s.carrier_radius()) * 1e3
-    tip = float(s.module_mm) * (s.teeth.planet + 2)
+def assembly_slots(stage) -> int:
+    """``Z_s + Z_r``: the assembly rule lets a planet sit only at multiples of
+    ``360 / (Z_s + Z_r)`` degrees (model.md, Geometry)."""
+    return int(stage.teeth.sun + stage.teeth.ring)
+
+
+def assembly_ok(stage, angles_deg, atol: float = 1e-6) -> bool:
+    """Whether every planet angle (deg) satisfies the assembly rule
+    ``(Z_s + Z_r) psi / 360`` integer."""
+    q = assembly_slots(stage) * np.asarray(angles_deg, dtype=float) / 360.0
+    return bool(np.all(np.abs(q - np.round(q)) <= atol))
+
+
+def min_planet_gap_deg(stage) -> float:
+    """Smallest angle (deg) between two planet centres that do not overlap: the
+    ``dpsi`` with ``2 r_c sin(dpsi / 2) = m (Z_p + 2)`` (any larger angle up to
+    ``360 - dpsi`` is clear); 180 when even opposite planets overlap."""
+    rc = float(stage.carrier_radius()) * 1e3
+    tip = float(stage.module_mm) * (stage.teeth.planet + 2)
+    if tip >= 2 * rc:
+        return 180.0
+    return math.degrees(2 * math.asin(tip / (2 * rc)))
+
+
+def overlapping_planets(stage, angles_deg) -> tuple[int, int, float, float] | None:
+    """The first pair of planets ``(i, j)`` (0-based) of ``angles_deg`` that overlap,
+    with their centre distance ``2 r_c |sin(dpsi/2)|`` and the tip diameter
+    ``m (Z_p + 2)`` (mm); ``None`` when none do (the rule of :func:`validate_train`)."""
+    psi = np.deg2rad(np.asarray(angles_deg, dtype=float))
+    rc = float(stage.carrier_radius()) * 1e3
+    tip = float(stage.module_mm) * (stage.teeth.planet + 2)
     for i in range(len(psi)):
         for j in range(i + 1, len(psi)):
-            gap = 2 * rc * math.sin((psi[j] - psi[i]) / 2)
-            if abs(gap) <= tip:
-                raise fail(
-                    train.source, f"{s.id}.planet_angles_deg",
-                    np.asarray(s.planet_angles_deg).tolist(),
-                    f"planets {i + 1} and {j + 1} overlap: centre distance 2 r_c sin(dpsi/2) = "
-                    f"{abs(gap):.4g} mm must exceed the tip diameter m (Z_p + 2) = {tip:.4g} mm",
-                )
+            gap = abs(2 * rc * math.sin((psi[j] - psi[i]) / 2))
+            if gap <= tip:
+                return i, j, gap, tip
+    return None
+
+
+def _check_overlap(train: Train, s) -> None:
+    hit = overlapping_planets(s, s.planet_angles_deg)
+    if hit is not None:
+        i, j, gap, tip = hit
+        raise fail(
+            train.source, f"{s.id}.planet_angles_deg",
+            np.asarray(s.planet_angles_deg).tolist(),
+            f"planets {i + 1} and {j + 1} overlap: centre distance 2 r_c sin(dpsi/2) = "
+            f"{gap:.4g} mm must exceed the tip diameter m (Z_p + 2) = {tip:.4g} mm",
+        )

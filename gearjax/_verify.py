@@ -31,6 +31,7 @@ system without backlash (``linear``, or a train without backlash), 2% with backl
 from __future__ import annotations
 
 import dataclasses
+import pathlib
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -251,6 +252,47 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
     return {"X": X, "harmonics": ks, "result": result, "stable": np.where(failed, np.nan,
                                                                            stable),
             "responses": responses}
+
+
+# ----------------------------------------------------------------------------- files
+
+
+def save_verify(result: VerifyResult, path) -> pathlib.Path:
+    """Write ``result`` to the NetCDF file ``path`` (h5netcdf): the root group holds
+    ``rel_diff`` and ``ok`` ``(point, mesh)`` and the attributes ``kind = "verify"``,
+    ``tolerance``, ``gear``, ``train_toml``, ``gearjax_version``; the groups ``hb`` and
+    ``ni`` hold the two results Datasets (``_results`` layout). Any other suffix than
+    ``.nc`` is refused with a ``ValueError``. **Returns:** the path written."""
+    import xarray as xr
+
+    from . import __version__
+
+    path = pathlib.Path(path)
+    if path.suffix.lower() != ".nc":
+        raise ValueError(f"verify results file {str(path)!r} has suffix {path.suffix!r}: "
+                         "use .nc (NetCDF, groups hb and ni)")
+    hb = result.hb
+    root = xr.Dataset(
+        {"rel_diff": (("point", "mesh"), np.asarray(result.rel_diff, float), {
+            "units": "1", "long_name": "|rms_ni - rms_hb| / largest rms_hb of the stage"}),
+         "ok": (("point", "mesh"), np.asarray(result.ok, bool), {
+             "units": "1", "long_name": "both converged and rel_diff <= tolerance"})},
+        coords=hb.coords.to_dataset()[["point", "mesh", "stage", "side", "planet"]].coords,
+        attrs={"kind": "verify", "tolerance": float(result.tolerance),
+               "gear": hb.attrs.get("gear", ""), "train_toml": hb.attrs.get("train_toml", ""),
+               "reference_stage": hb.attrs.get("reference_stage", ""),
+               "gearjax_version": __version__})
+    root.to_netcdf(path, mode="w", engine="h5netcdf")
+    result.hb.to_netcdf(path, mode="a", group="hb", engine="h5netcdf")
+    result.ni.to_netcdf(path, mode="a", group="ni", engine="h5netcdf")
+    return path
+
+
+def load_verify(path):
+    """``(root, hb, ni)`` Datasets of a file written by :func:`save_verify`."""
+    import xarray as xr
+
+    return tuple(xr.load_dataset(path, group=g, engine="h5netcdf") for g in (None, "hb", "ni"))
 
 
 # ------------------------------------------------------------------------------ JSON

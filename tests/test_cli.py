@@ -125,3 +125,106 @@ def test_calibrate_bad_path_exits_2(capsys):
     code, out, err = run(capsys, "calibrate", "--targets-hz", "3880", "--free", "1.teeth.sun")
     assert code == 2 and out == ""
     assert "--free" in err and "1.teeth.sun" in err
+
+
+# ----------------------------------------------------------------------------- plot
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory):
+    """Small results files of every kind gearjax plot draws (made up numbers: the
+    figures, not the solvers, are under test)."""
+    import warnings
+
+    import numpy as np
+    import xarray as xr
+
+    import gearjax as gj
+    from gearjax._responses import RESPONSE_FIELDS, MeshResponses
+    from gearjax._verify import VerifyResult, save_verify
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gj.GeometryWarning)
+        train = gj.load_train()
+    coords = gj.mesh_coordinates(gj.assemble(train))
+    m, P = len(coords["mesh_labels"]), 6
+    hz = np.linspace(2400.0, 2500.0, P)
+    rng = np.random.default_rng(1)
+
+    def dataset(kind, **kw):
+        resp = MeshResponses(**{k: rng.uniform(1.0, 2.0, (P, m)) for k in RESPONSE_FIELDS})
+        return gj.sweep_dataset(
+            resp, **coords, mesh_frequency_hz=hz,
+            stage_mesh_frequency_hz=np.stack([hz, hz * 8 / 7], 1), input_rpm=hz / 0.2264,
+            omega=2 * np.pi * hz / 7, result=["converged"] * (P - 1) + ["max_steps"],
+            train_toml=gj.dumps_train(train), gear="first", solver={"linear": False},
+            attrs={"kind": kind, "reference_stage": "1"}, **kw)
+
+    root = tmp_path_factory.mktemp("saved")
+    files = {}
+    files["sweep"] = gj.save_results(dataset("sweep", stable=[1, 1, 0, 0, 1, 1]),
+                                     root / "sweep.nc")
+    sim = dataset("simulate", period=np.ones(P))
+    sim["num_steps"] = ("point", np.full(P, 100), {"units": "1"})
+    files["simulate"] = gj.save_results(sim, root / "sim.nc")
+    hb, ni = dataset("sweep", stable=[1] * P), dataset("simulate", period=np.ones(P))
+    rel = np.abs(ni.rms_force.values - hb.rms_force.values) / 2
+    files["verify"] = save_verify(VerifyResult(
+        hb=hb, ni=ni, rms_hb=hb.rms_force.values, rms_ni=ni.rms_force.values, rel_diff=rel,
+        ok=rel < 0.3, tolerance=0.02, seconds={}), root / "verify.nc")
+    files["design"] = gj.save_results(dataset("design"), root / "design.nc")
+    files["foreign"] = root / "foreign.nc"
+    xr.Dataset({"a": ("x", np.arange(3.0))}).to_netcdf(files["foreign"], engine="h5netcdf")
+    files["text"] = root / "notes.nc"
+    files["text"].write_text("not a results file\n")
+    return files
+
+
+@pytest.mark.parametrize("kind", ["sweep", "simulate", "verify"])
+def test_plot_redraws_saved_results(capsys, saved, tmp_path, kind):
+    for what in ("rms", "dlf", "separation", "torque"):
+        fig = tmp_path / f"{kind}-{what}.png"
+        code, out, err = run(capsys, "plot", str(saved[kind]), "--what", what, "--out", str(fig))
+        assert code == 0 and fig.stat().st_size > 10_000, err
+        assert f"{kind} results" in out and str(fig) in out
+
+
+def test_plot_default_figure_and_json(capsys, saved):
+    fig = saved["sweep"].with_suffix(".png")
+    code, out, _ = run(capsys, "plot", str(saved["sweep"]), "--json")
+    data = json.loads(out)
+    assert code == 0 and data == {"results": str(saved["sweep"]), "kind": "sweep",
+                                  "what": "rms", "figure": str(fig)}
+    assert fig.stat().st_size > 10_000
+
+
+def test_saved_verify_results_read_back(saved):
+    import xarray as xr
+
+    from gearjax._verify import load_verify
+
+    root, hb, ni = load_verify(saved["verify"])
+    assert root.attrs["kind"] == "verify" and root.attrs["tolerance"] == 0.02
+    assert root["rel_diff"].dims == ("point", "mesh") and root["ok"].dtype == bool
+    assert hb.attrs["kind"] == "sweep" and ni.sizes == hb.sizes
+    xr.testing.assert_identical(hb["mesh"], root["mesh"])
+
+
+@pytest.mark.parametrize("name, words", [
+    ("missing", ["missing.nc", "no such results file"]),
+    ("text", ["notes.nc", "not a NetCDF results file"]),
+    ("foreign", ["foreign.nc", "not a gearjax results file"]),
+    ("design", ["design.nc", "kind = 'design'", "cannot draw", "sweep, simulate, verify"]),
+])
+def test_plot_of_a_file_it_cannot_draw_exits_2(capsys, saved, tmp_path, name, words):
+    path = saved.get(name, tmp_path / "missing.nc")
+    code, out, err = run(capsys, "plot", str(path))
+    line = [l for l in err.splitlines() if l.startswith("gearjax: error:")]
+    assert code == 2 and out == "" and len(line) == 1 and "Traceback" not in err
+    for w in words:
+        assert w in line[0]
+
+
+def test_verify_out_must_be_netcdf(capsys):
+    code, out, err = run(capsys, "verify", "--at", "3000", "--out", "v.csv")
+    assert code == 2 and "--out = 'v.csv': must end in .nc" in err

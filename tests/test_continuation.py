@@ -90,3 +90,40 @@ def test_stops_with_reason_and_keeps_points(branch):
     settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02)
     b = C.continue_branch(branch["param"], branch["y0"], 0.5, 1.5, settings, max_points=5)
     assert b.stop == "max_points" and len(b.lam) == 5 and np.all(np.isfinite(b.y))
+
+
+class _Circle(C.AbstractParameter):
+    """``y^2 + (lambda - 1)^2 = 1/4``: a closed solution curve (an isola), one unknown."""
+
+    problem: _hb.HBProblem
+
+    def split(self, lam):
+        return self.problem, lam
+
+    def residual(self, y, lam):
+        return y**2 + (lam - 1.0) ** 2 - 0.25
+
+    def jacobian(self, y, lam):
+        return jnp.diag(2 * y)
+
+    def d_lambda(self, y, lam):
+        return 2 * (lam - 1.0) * jnp.ones_like(y)
+
+
+def test_closed_loop_stops_after_one_turn():
+    problem = _hb.hb_problem(oscillator(), _hb.HarmonicBalance(n_harmonics=1, n_time=8))
+    settings = C.Settings(step=0.05, max_step=0.05, max_dlambda=0.05, fold_step=0.05)
+    br = C.continue_branch(_Circle(problem=problem), jnp.asarray([0.5]), 1.0, 3.0, settings,
+                           max_points=2000)
+    assert br.stop == "closed_loop"
+    # one turn of the circle (length pi) in chords of about 0.05, plus the closing stretch
+    turn = np.pi / 0.05
+    assert turn < len(br.lam) < 1.5 * turn
+    np.testing.assert_allclose(br.y[:, 0] ** 2 + (br.lam - 1) ** 2, 0.25, atol=1e-8)
+
+
+def test_branch_through_folds_is_not_a_loop(branch):
+    """The oscillator's branch turns back twice, close to itself: not a closed loop."""
+    br = C.continue_branch(branch["param"], branch["y0"], 0.5, 1.5, branch["settings"], 400)
+    assert br.stop == "reached_end"
+    assert len(C.distinct_folds(br.fold_lam[br.fold])) == 2

@@ -131,3 +131,22 @@ def test_json_period_is_null_with_a_reason_when_no_repeat_was_found(paper_meshes
     points = gj.points_json(make_dataset(paper_meshes, period=[1.0, 2.0, 0.0]))
     assert [p["period"] for p in points] == [1.0, 2.0, None]
     assert "period_reason" not in points[0] and "did not repeat" in points[2]["period_reason"]
+
+
+def test_simulation_results_are_labelled_data_and_read_back_identical(tmp_path):
+    """A real (short, loose) time integration: the same layout as a sweep, its kind and
+    integration statistics with units, an identical NetCDF round trip, CSV rows."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gj.GeometryWarning)
+        train = gj.load_train()
+    settings = gj.TimeDomain(max_periods=3, rtol=1e-6, atol=1e-6)
+    ds = gj.simulate_gear(train, "first", [4000.0], linear=True, settings=settings)
+    assert ds.attrs["kind"] == "simulate" and ds.attrs["gear"] == "first"
+    assert {"train_toml", "solver", "gearjax_version"} <= set(ds.attrs)
+    assert {"stage", "side", "planet"} <= set(ds["mesh"].coords)
+    assert all("units" in ds[v].attrs for v in ds.data_vars)
+    assert {"period", "periods", "num_steps"} <= set(ds.data_vars)
+    back = gj.load_results(gj.save_results(ds, tmp_path / "sim.nc"))
+    xr.testing.assert_identical(back, ds)
+    df = pd.read_csv(gj.save_results(ds, tmp_path / "sim.csv"))
+    assert len(df) == 16 and "period" in df.columns and df.stable.isna().all()

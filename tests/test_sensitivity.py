@@ -196,3 +196,51 @@ def test_cli_not_converged(capsys, monkeypatch):
     assert "NaN" not in out and data["value"] is None
     assert data["result"] == "not_converged" and data["derivatives"] is None
     assert "3000 Hz" in data["reason"] and "did not converge" in err
+
+
+# ------------------------------------------------------------------- stage phase
+
+
+def test_stage_phase_derivative_resolved_and_a_time_shift(train):
+    # A stage phase shifts one stage's excitation in time. The stage-1 meshes vary at
+    # 7 h and the stage-2 meshes at 8 h times the base frequency, so the two stages'
+    # responses only meet in combination tones; K = 8 keeps h = 1 of each and the
+    # derivative is round-off (~1e-13), K = 32 resolves every stiffness harmonic
+    # (H = 4: orders up to 32) and the sweep's rule gives K = 48 at 3000 Hz.
+    paths = ("2.stage_phase_deg", "1.stage_phase_deg")
+    result = S.sensitivity(train, at_hz=AT, paths=paths, harmonics=32, linear=True)
+    assert result.ok, result.message
+    d2, d1 = result.derivative
+    assert abs(d2) > 1e-6 * result.value  # N per deg: non-zero
+    fd, noise = finite_differences(train, result, linear=True)
+    assert np.all(np.abs(result.derivative - fd) <= 1e-5 * np.abs(fd) + noise), (result.derivative,
+                                                                               fd)
+    # a common time shift t changes Gamma_n by w_n t and no RMS: w_1 dR/dG_1 + w_2 dR/dG_2 = 0
+    mu = gj.kinematics(train, "first").mu
+    assert mu[0] * d1 + mu[1] * d2 == pytest.approx(0.0, abs=1e-8 * abs(mu[1] * d2))
+
+
+def test_default_paths_are_those_of_the_gear(train):
+    every = gj.continuous_paths(train)
+    first = gj.continuous_paths(train, "first")
+    assert "gears.first.input_torque" in first and "gears.second.input_torque" not in first
+    assert "couplings.lockup.stiffness" in every and "couplings.lockup.stiffness" not in first
+    assert "1.half_backlash.sun" in first
+    assert "1.half_backlash.sun" not in gj.continuous_paths(train, "first", linear=True)
+    third = gj.continuous_paths(train, "third")  # nothing turns: no phasing, no brake
+    assert "couplings.lockup.stiffness" in third and "housing.braked" not in third
+    assert not any(p.split(".")[1] in ("planet_angles_deg", "stage_phase_deg", "contact_ratio")
+                   for p in third if p[0].isdigit())
+    # every path left out has exactly no effect on the assembled system (jacfwd)
+    import jax
+
+    family = S.GearFamily.of(train, every, "first", linear=True)
+    leaves = lambda th: jax.tree_util.tree_leaves(  # noqa: E731
+        eqx.filter(family(th), eqx.is_inexact_array))
+    J = jax.jacfwd(lambda th: jnp.concatenate([x.reshape(-1) for x in leaves(th)]))(
+        family.theta())
+    moves = np.any(np.asarray(J) != 0, axis=0)
+    linear = gj.continuous_paths(train, "first", linear=True)
+    assert [p for p, m in zip(every, moves) if m] == linear
+    result = S.sensitivity(train, "first", AT, harmonics=K, linear=True)
+    assert result.paths == tuple(linear)

@@ -57,8 +57,9 @@ def test_bad_input_exits_2_with_one_line(capsys, argv, message):
 
 
 def test_verify_linear_paper_first_gear_within_1_percent(capsys, tmp_path):
-    fig = tmp_path / "verify.png"
-    code = main(["verify", "--linear", "--at", "3000", "3300", "--json", "--plot", str(fig)])
+    fig, nc = tmp_path / "verify.png", tmp_path / "verify.nc"
+    code = main(["verify", "--linear", "--at", "3000", "3300", "--json", "--plot", str(fig),
+                 "--out", str(nc)])
     captured = capsys.readouterr()
     out = json.loads(captured.out)
     assert code == 0 and "verify: harmonic balance" in captured.err
@@ -71,6 +72,10 @@ def test_verify_linear_paper_first_gear_within_1_percent(capsys, tmp_path):
             assert {"name", "rms_hb", "rms_ni", "rel_diff", "ok"} <= set(m)
             assert m["ok"] and m["rel_diff"] < 0.01 and m["rms_hb"] > 100
     assert out["points"][0]["mesh_frequency_hz"] == 3000.0
+    # the saved verification redraws without recomputing
+    assert main(["plot", str(nc), "--what", "dlf"]) == 0
+    assert "verify results" in capsys.readouterr().out
+    assert nc.with_suffix(".png").stat().st_size > 10_000
     assert fig.stat().st_size > 10_000
 
 
