@@ -39,8 +39,10 @@ Three models, cheapest first:
    (:mod:`gearjax._design`: parametric coupling kept, no backlash), batched;
 3. *non-linear*: the ``nonlinear`` best by sweeps with backlash
    (:func:`gearjax.sweep`, continuation), restarted just above the frequency where a
-   sweep stops (a fold with a jump, a closed loop) so the band is covered as an
-   up-sweep covers it.
+   sweep stops (a fold with a jump, a closed loop, its point budget) so the band is
+   covered as an up-sweep covers it; the peak is over the stable points (unstable
+   orbits and spurious branches with a load factor above :data:`MAX_DLF` are counted
+   and left out, :class:`NonlinearBand`).
 
 The continuous relaxation (planet angles continuous, non-overlapping through a softmax
 of the gaps, phases continuous; the assembly rule dropped, so it cannot be built)
@@ -78,6 +80,8 @@ TIE_DEPTH = 8
 """How many of the band's largest values break ties (:func:`leximax_order`)."""
 NONLINEAR_RTOL = 1e-3
 """Peaks of sweeps with backlash closer than this (relative) count as equal."""
+MAX_DLF = 50.0
+"""Sweep points with a larger dynamic load factor are spurious (:class:`NonlinearBand`)."""
 
 
 # ------------------------------------------------------------------ planet sets
@@ -443,7 +447,10 @@ class NonlinearBand:
     **Fields:** ``frequencies_hz`` ``(P,)`` and ``rms_force`` ``(P, m)`` of the converged,
     stable points of every sweep, in solve order (an unstable periodic orbit is not
     what the gearbox shows, and branches past parametric instabilities reach absurd
-    amplitudes); ``unstable``: converged points left out; ``starts_hz``, ``stops``
+    amplitudes); ``unstable``: converged points left out; ``implausible``: stable points
+    left out because a mesh's dynamic load factor exceeds ``max_dlf`` (RMS forces of
+    meganewtons on a mesh loaded with kilonewtons: spurious branches of the truncated
+    harmonic balance, not responses); ``starts_hz``, ``stops``
     (one per sweep: where it started, why it ended); ``coverage``: share of the band
     (in log frequency) the sweeps traced; ``peak``: largest RMS (N); ``stage_peaks``:
     per stage; ``seconds``.
@@ -457,12 +464,14 @@ class NonlinearBand:
     peak: float
     stage_peaks: dict
     unstable: int
+    implausible: int
     seconds: float
 
 
 def nonlinear_band(train: Train, gear: str, lo: float, hi: float, *, stage: str | None = None,
                    harmonics: int | None = None, max_step_hz: float | None = None,
                    max_points: int = 3000, restarts: int = 8, jump: float = 0.01,
+                   max_dlf: float = MAX_DLF,
                    progress: Callable[[str], None] | None = None) -> NonlinearBand:
     """Sweep ``gear`` with backlash from ``lo`` to ``hi`` (reference-stage Hz); where a
     sweep stops early (a fold it cannot pass, a closed loop, ``max_points`` continuation
@@ -474,7 +483,7 @@ def nonlinear_band(train: Train, gear: str, lo: float, hi: float, *, stage: str 
     t0 = time.perf_counter()
     f0, freqs, rms, starts, stops, spans = lo, [], [], [], [], []
     labels = stage_of = None
-    unstable = 0
+    unstable = implausible = 0
     for _ in range(restarts + 1):
         starts.append(f0)
         try:
@@ -488,20 +497,24 @@ def nonlinear_band(train: Train, gear: str, lo: float, hi: float, *, stage: str 
             continue
         ds = r.dataset
         traced = ds["converged"].values
-        ok = traced & (ds["stable"].values == 1)  # what a gearbox shows: stable orbits
+        stable = traced & (ds["stable"].values == 1)  # what a gearbox shows: stable orbits
+        dlf = np.nanmax(np.where(np.isfinite(ds["dlf"].values), ds["dlf"].values, 0.0), axis=1)
+        ok = stable & (dlf <= max_dlf)
+        implausible += int(np.sum(stable & (dlf > max_dlf)))
         f = ds["mesh_frequency_hz"].values[ok]
         labels = ds["mesh"].values.tolist()
         stage_of = ds["stage"].values.tolist()
         freqs.append(f)
         rms.append(ds["rms_force"].values[ok])
         stops.append(r.stop)
-        unstable += int(traced.sum() - ok.sum())
+        unstable += int(traced.sum() - stable.sum())
         reached = ds["mesh_frequency_hz"].values[traced]
         top = float(np.max(reached)) if reached.size else f0
         spans.append((f0, max(top, f0)))
         if progress:
             progress(f"  sweep from {f0:.0f} Hz: {int(traced.sum())} points to {top:.0f} Hz "
-                     f"({r.stop}), {int(traced.sum() - ok.sum())} unstable")
+                     f"({r.stop}), {int(traced.sum() - stable.sum())} unstable, "
+                     f"{int(np.sum(stable & (dlf > max_dlf)))} implausible")
         if r.stop == "reached_end" or top >= hi:
             break
         f0 = max(top, f0) * (1 + jump)
@@ -522,6 +535,7 @@ def nonlinear_band(train: Train, gear: str, lo: float, hi: float, *, stage: str 
     return NonlinearBand(frequencies_hz=f, rms_force=R, starts_hz=tuple(starts),
                          stops=tuple(stops), coverage=min(1.0, covered / math.log(hi / lo)),
                          peak=peak, stage_peaks=stage_peaks, unstable=unstable,
+                         implausible=implausible,
                          seconds=time.perf_counter() - t0)
 
 
@@ -1184,6 +1198,7 @@ def _design_json(d: Design) -> dict:
         "nonlinear_stage_peaks": None if nl is None else nl.stage_peaks,
         "nonlinear_coverage": None if nl is None else nl.coverage,
         "nonlinear_unstable_points": None if nl is None else nl.unstable,
+        "nonlinear_implausible_points": None if nl is None else nl.implausible,
         "nonlinear_sweeps": None if nl is None else [
             {"from_hz": a, "stop": b} for a, b in zip(nl.starts_hz, nl.stops)],
     }

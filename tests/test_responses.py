@@ -181,21 +181,26 @@ def test_paper_mean_forces_balance_the_mean_row(paper):
 
 
 def test_paper_mean_forces_equal_static_without_housing_leak(paper):
-    """With the free housing springs 1e4 times softer the leak vanishes and the mean
-    mesh forces equal the static ones to 1e-6 (those move too: 8944.3 N in stage 1,
-    as the static solution also leaks 2 N through the 1e2 N m/rad springs)."""
-    system, _, _ = paper
+    """The mean mesh forces differ from the static ones only by the torque leaking through
+    the 1e2 N m/rad housing springs of the free members (5.2e-4 relative): with those
+    springs 100 times softer the difference is 100 times smaller (5.2e-6), the leak
+    linear in their stiffness. (Softer still, 1e-2, the stiffness spans 12 decades and
+    Newton's convergence depends on the machine's rounding.)"""
+    system, problem, sol = paper
     free = np.flatnonzero([c == "rigid" for c in system.spring_class])  # the 1e2 N m/rad springs
     assert np.all(system.spring_stiffness[free] == 1e2)
+    dev_stiff = np.asarray(responses(problem, sol.X, OMEGA, static_forces(system)).mean_force
+                           / static_forces(system) - 1)
     system = dataclasses.replace(
-        system, spring_stiffness=system.spring_stiffness.at[free].set(1e-2))  # same compile key
+        system, spring_stiffness=system.spring_stiffness.at[free].set(1.0))  # same compile key
     problem = problem_of(system, SETTINGS)
     sol = solve(problem, OMEGA)
     assert int(sol.result) == _hb.CONVERGED
     F_static = static_forces(system)
     r = responses(problem, sol.X, OMEGA, F_static)
-    np.testing.assert_allclose(r.mean_force, F_static, rtol=1e-6)
-    np.testing.assert_allclose(r.mean_torque, system.mesh_radius * F_static, rtol=1e-6)
+    np.testing.assert_allclose(r.mean_force, F_static, rtol=1e-5)
+    dev_soft = np.asarray(r.mean_force / F_static - 1)
+    np.testing.assert_allclose(np.abs(dev_soft).max() * 100, np.abs(dev_stiff).max(), rtol=0.01)
 
 
 def test_paper_vmap_over_points(paper):
