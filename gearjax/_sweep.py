@@ -129,9 +129,11 @@ def sweep(
     ``max_detour`` points without passing the furthest frequency it reached
     (``detour``: with tooth separation on many meshes the paper case has intricate
     multi-valued regions), or cannot go on (``step_too_small``, ``nonfinite``), the
-    sweep keeps every point of it and starts a new branch from a fresh solution
-    (:func:`start_point`) a small step beyond that furthest frequency, as a sweep on a
-    test rig jumps. Each point carries its ``branch`` number and ``restarts`` lists
+    sweep keeps every point of it and starts a new branch a quarter of the largest step
+    beyond that furthest frequency, as a sweep on a test rig jumps: Newton from the
+    branch's furthest point, else a fresh solution (:func:`start_point`). Where no start
+    converges the gap doubles with each try (the unexplored band grows, but a failed
+    start costs a backlash homotopy, seconds). Each point carries its ``branch`` number and ``restarts`` lists
     where and why, so the frequencies between are known to be unexplored.
 
     **Raises:** ``TrainError`` for a gear where no mesh turns, an impractical ``mu``,
@@ -186,6 +188,8 @@ def sweep(
     fresh = {0}  # segments that start a new branch (the others continue the one before)
     stop = "reached_end"
     previous = None  # (K, y, lambda) of the last point of the segment before
+    furthest = None  # (K, y, lambda) of the furthest point so far: a fresh branch's first guess
+    failed = 0  # fresh starts that failed in a row: the restart gap doubles with each
     done = 0  # points kept so far (a segment's first point repeats the previous last)
     segments = list(segments)
     j = -1
@@ -219,6 +223,7 @@ def sweep(
                 seg_stop = _continue_segment(
                     log, j, K, param, None if j in fresh else previous, lam_a, lam_b,
                     settings, cap=max_points - done, f_a=f_a, f_ref=from_hz,
+                    guess=furthest if j in fresh else None,
                     max_detour=max_detour,
                     progress=(lambda i, lam, start=done: progress(start + i + 1, lam * from_hz))
                     if progress else None)
@@ -229,12 +234,15 @@ def sweep(
                 folds += [p["fold_lam"] * from_hz for p in pts if p["fold"]]
                 done += len(pts) - (1 if done and j not in fresh else 0)
                 previous = (K, pts[-1]["y"], pts[-1]["lam"])
+                far = max(pts, key=lambda p: p["lam"] * np.sign(to_hz - from_hz))
+                furthest = (K, far["y"], far["lam"])
+            failed = failed + 1 if seg_stop.startswith("no converged") else 0
             restartable = seg_stop in RESTART_STOPS or seg_stop.startswith("no converged")
             if restartable and len(restarts) < MAX_RESTARTS and done < max_points:
                 lams = [lam_a] + [p["lam"] for p in pts]
                 reached = (max if to_hz > from_hz else min)(lams) * from_hz
-                at = reached + math.copysign(_restart_step(max_step_hz, to_hz - from_hz),
-                                             to_hz - from_hz)
+                at = reached + math.copysign(
+                    _restart_step(max_step_hz, to_hz - from_hz) * 2 ** failed, to_hz - from_hz)
                 restarts.append({"from_hz": float(reached), "at_hz": float(at),
                                  "reason": seg_stop})
                 if (at - f_b) * (to_hz - from_hz) < 0:
@@ -393,7 +401,7 @@ class _SweepLog:
 
 
 def _continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap, f_a, f_ref,
-                      progress, max_detour=MAX_DETOUR):
+                      progress, max_detour=MAX_DETOUR, guess=None):
     """Continue segment ``j`` from ``lam_a`` to ``lam_b`` (at most ``cap`` points), or the
     rest of it after the points ``log`` holds; every point goes to ``log``. The resumed
     state is the saved point with its tangent and step, and the factors of its bordered
@@ -440,7 +448,8 @@ def _continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap
         return "detour" if detour(lam) and (lam - lam_b) * direction < 0 else None
 
     if not have:
-        y, code = _enter_segment(param.problem, param, previous, lam_a, float(param.omega_ref))
+        y, code = _enter_segment(param.problem, param, previous, lam_a, float(param.omega_ref),
+                                 guess)
         if code != _hb.CONVERGED:
             return f"no converged start at {f_a:.1f} Hz ({_hb.RESULTS[code]})"
         return _continuation.continue_branch(param, y, lam_a, lam_b, settings, max_points=cap,
@@ -540,7 +549,8 @@ def _segments(from_hz, to_hz, mu_ref, min_k, eta, fixed):
 
 def _restart_step(max_step_hz, span_hz) -> float:
     """Frequency step (Hz, > 0) from the furthest point of a branch to the next branch's
-    start: a quarter of the largest continuation step."""
+    start: a quarter of the largest continuation step (doubled per failed start by the
+    caller)."""
     return 0.25 * (max_step_hz or abs(span_hz) / 100)
 
 
@@ -557,9 +567,18 @@ def _solve_points(problem, omegas):
     return jax.vmap(lambda w: _hb.solve_hb(problem, w))(omegas)
 
 
-def _enter_segment(problem, param, previous, lam, omega_ref):
-    """Scaled unknowns converged at ``lam`` with this segment's harmonics."""
+def _enter_segment(problem, param, previous, lam, omega_ref, guess=None):
+    """Scaled unknowns converged at ``lam`` with this segment's harmonics: continuing
+    ``previous`` (K, y, lambda), or a fresh branch, whose first guess is ``guess`` (the
+    furthest point of the branch before, as a rig's response jumps from it) and then
+    :func:`start_point`."""
     if previous is None:
+        if guess is not None:
+            K_old, y_old, _ = guess
+            sol = _newton_jit(problem, jnp.asarray(lam * omega_ref),
+                              resize_harmonics(y_old, K_old, problem))
+            if int(sol.result) == _hb.CONVERGED:
+                return sol.y, _hb.CONVERGED
         return start_point(problem, lam * omega_ref)
     K_old, y_old, lam_old = previous
     sol = _newton_jit(problem, jnp.asarray(lam_old * omega_ref),

@@ -94,3 +94,30 @@ def test_nonlinear_sweep_keeps_mean_load_and_reports_stability(train):
             np.testing.assert_allclose(mean, ds["static_force"].values[cols].sum(), rtol=1e-3)
     f = ds["mesh_frequency_hz"].values  # --max-step bounds the predictor; the corrector
     assert np.all(np.diff(f) <= 1.05 * 20)  # moves the frequency by a few percent of it
+
+
+def test_branch_past_a_fold_restarts_beyond_it_with_doubling_gaps(train, monkeypatch):
+    """Up through the fold at 3272.2 Hz (K = 16) the branch turns back; after ``max_detour`` points
+    without passing the furthest frequency the sweep keeps them and restarts a fresh branch
+    beyond it, 2.5 Hz (a quarter of the 10 Hz step) further, the gap doubling after each
+    start that fails. Fresh starts just above this fold do fail (Newton from the branch's
+    furthest point and the backlash homotopy both, measured up to 3310 Hz); the homotopy
+    takes 9 s a try, so here it is replaced by an immediate failure."""
+    tried, real_start = [], _sweep.start_point
+
+    def no_start(problem, omega):
+        tried.append(float(omega))
+        return real_start(problem, omega) if len(tried) == 1 else (None, gj._hb.MAX_STEPS)
+
+    monkeypatch.setattr(_sweep, "start_point", no_start)
+    r = _sweep.sweep(train, "first", 3240, 3300, harmonics=16, max_step_hz=10, max_detour=10)
+    ds = r.dataset
+    f, branch = ds["mesh_frequency_hz"].values, ds["branch"].values
+    assert np.all(branch == 0) and np.all(ds["converged"].values)
+    assert len(r.folds_hz) == 1 and abs(r.folds_hz[0] - 3272.2) < 0.5  # 3273.9 at K = 64
+    reached = f.max()
+    assert [x["reason"] for x in r.restarts][0] == "detour"
+    gaps = np.diff([reached] + [x["at_hz"] for x in r.restarts])
+    np.testing.assert_allclose(gaps, [2.5, 5.0, 10.0], rtol=1e-9)
+    assert len(tried) == 4 and r.stop.startswith("no converged start at 3289.")
+    assert "restarts" in _sweep.summary_json(r)
