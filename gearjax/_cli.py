@@ -163,8 +163,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="L-BFGS iterations of the continuous relaxation (0: skip)")
     c.add_argument("--passes", type=int, default=1, metavar="N",
                    help="rounds over the stages (default 1)")
-    c = sub.add_parser("plot", help="redraw a saved result (sweep, simulate, verify)",
-                       description="redraw a saved result (sweep, simulate, verify) without "
+    c = sub.add_parser("plot", help="redraw a saved result (sweep, simulate, verify, optimize)",
+                       description="redraw a saved result (sweep, simulate, verify, optimize) without "
                                    "recomputing")
     c.add_argument("results", metavar="RESULTS.nc", help="a results file written with --out")
     c.add_argument("--what", choices=("rms", "dlf", "separation", "torque"), default="rms",

@@ -83,7 +83,24 @@ def plot_sweep(ds, path: str, what: str = "rms", title: str = ""):
                             color=f"C{(planet - 1) % 10}",  # one colour per planet
                             label=(f"planet {planet}" if flag == 1 and first and b == branch[0]
                                    else None))
+        values = np.asarray(ds[var])[:, meshes]
+        _clip_to_stable(ax, values, values[stable == 1])
     _finish(fig, axes, ds, path, title or "frequency response (solid stable, dashed unstable)")
+
+
+def _clip_to_stable(ax, values, stable_values, factor: float = 1.5) -> None:
+    """Keep the stable response readable: where unstable branches reach more than
+    ``factor`` times the largest stable value (inside a parametric instability the
+    periodic orbits of the paper case reach meganewtons, all unstable), the y-axis stops
+    at ``factor`` times it and a note gives how far the unstable branches go."""
+    top = np.nanmax(stable_values) if np.any(np.isfinite(stable_values)) else np.nan
+    high = np.nanmax(values) if np.any(np.isfinite(values)) else np.nan
+    if not (np.isfinite(top) and top > 0 and high > factor * top):
+        return
+    low = min(0.0, float(np.nanmin(values)))
+    ax.set_ylim(low, factor * top)
+    ax.text(0.99, 0.97, f"unstable branches up to {high:.3g}, off scale", fontsize=7,
+            ha="right", va="top", transform=ax.transAxes, color="0.3")
 
 
 def _mesh_panels(ds, ylabel: str):
@@ -261,9 +278,58 @@ def _redraw_verify(path, ds, fig, what):
                 + "\nlines: harmonic balance, markers: time integration")
 
 
+def plot_optimize(ds, path: str, title: str = ""):
+    """A phasing optimisation (``optimize_dataset``): per stage, the largest RMS force of
+    its meshes against reference-stage mesh frequency for the baseline, the optimum and
+    the continuous relaxation (lines, linear time-varying harmonic balance on the common
+    grid) and, where they were swept, the stable points with backlash (markers)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    stages = list(dict.fromkeys(np.asarray(ds["stage"]).tolist()))
+    fig, axes = plt.subplots(len(stages), 1, figsize=(9, 3.0 * len(stages)), squeeze=False,
+                             sharex=True)
+    f = np.asarray(ds["frequency"]) / 1e3
+    order = np.argsort(f)
+    styles = {"baseline": ("k", "-"), "optimum": ("C3", "-"), "relaxed": ("C0", ":")}
+    for ax, stage in zip(axes[:, 0], stages):
+        cols = np.asarray(ds["stage"]) == stage
+        for d, design in enumerate(np.asarray(ds["design"]).tolist()):
+            color, ls = styles.get(design, ("C2", "--"))
+            peak = np.nanmax(np.asarray(ds["linear_rms"])[d][:, cols], axis=1)
+            ax.plot(f[order], peak[order], ls, color=color, lw=1.0,
+                    label=f"{design} (linear)" if design != "relaxed"
+                    else "relaxed (linear, cannot be assembled)")
+        for design in ("baseline", "optimum"):
+            if f"{design}_nonlinear_rms" in ds:
+                color = styles[design][0]
+                y = np.nanmax(np.asarray(ds[f"{design}_nonlinear_rms"])[:, cols], axis=1)
+                ax.plot(np.asarray(ds[f"{design}_nonlinear_frequency_hz"]) / 1e3, y, ".",
+                        ms=2.5, color=color, alpha=0.6, label=f"{design} (backlash, stable)")
+        ax.set_yscale("log")
+        ax.set_ylabel("largest RMS mesh force (N)", fontsize=8)
+        ax.set_title(f"stage {stage} meshes", fontsize=9)
+        ax.grid(alpha=0.3, which="both")
+    axes[0, 0].legend(fontsize=7)
+    axes[-1, 0].set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
+    fig.suptitle(title or "phasing optimisation: baseline and optimum", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _redraw_optimize(path, ds, fig, what):
+    peaks = (f"peak {ds.attrs.get('baseline_peak_linear', math.nan):.0f} N -> "
+             f"{ds.attrs.get('optimum_peak_linear', math.nan):.0f} N (linear)")
+    plot_optimize(ds, fig, title=_title(ds, "rms", "optimisation") + f"\n{peaks}")
+
+
 RESULT_PLOTS: dict[str, Callable] = {
     "sweep": _redraw_sweep,
     "simulate": _redraw_simulate,
     "verify": _redraw_verify,
+    "optimize": _redraw_optimize,
 }
 """Drawing function per result kind: ``f(results_path, dataset, figure_path, what)``."""

@@ -49,9 +49,25 @@ MAX_DETOUR = 150
 restarts beyond it (about the length of a fold pair of the paper case: up to a fold,
 back along the unstable branch to the next)."""
 
+MIN_ADVANCE = 0.05
+"""Passing the furthest frequency counts only by this share of the largest step or more:
+a branch that creeps upwards by tenths of a hertz per point (amplitude growing without
+bound inside a parametric instability, measured at 6.87 kHz on the paper case) is a
+detour too."""
+
+RUNAWAY = 5.0
+"""A branch whose RMS alternating deflection of a mesh exceeds this many times the
+mesh's static deflection plus its backlash has run away (``runaway``): inside a
+parametric instability the paper case's periodic orbits climb to meganewtons (RMS
+deflections of centimetres, the teeth hammering across the clearance), every one
+unstable, and the truncated harmonic balance cannot resolve such impacts anyway. The
+sweep restarts beyond. Over 2-15 kHz the paper case's other orbits stay below 0.41
+(measured as RMS force over static force plus stiffness x backlash); those in the
+parametric instability at 6.7-6.9 kHz start above 10 and climb past 50."""
+
 MAX_RESTARTS = 100
 
-RESTART_STOPS = ("closed_loop", "detour", "step_too_small", "nonfinite")
+RESTART_STOPS = ("closed_loop", "detour", "step_too_small", "nonfinite", "runaway")
 """Continuation stops after which a sweep restarts on a new branch."""
 
 
@@ -128,12 +144,14 @@ def sweep(
     Where the branch closes on itself (``closed_loop``), wanders back and forth for
     ``max_detour`` points without passing the furthest frequency it reached
     (``detour``: with tooth separation on many meshes the paper case has intricate
-    multi-valued regions), or cannot go on (``step_too_small``, ``nonfinite``), the
-    sweep keeps every point of it and starts a new branch a quarter of the largest step
-    beyond that furthest frequency, as a sweep on a test rig jumps: Newton from the
-    branch's furthest point, else a fresh solution (:func:`start_point`). Where no start
-    converges the gap doubles with each try (the unexplored band grows, but a failed
-    start costs a backlash homotopy, seconds). Each point carries its ``branch`` number and ``restarts`` lists
+    multi-valued regions; passing it counts by :data:`MIN_ADVANCE` of the largest step
+    or more), runs away to absurd amplitudes (``runaway``, :data:`RUNAWAY`), or cannot
+    go on (``step_too_small``, ``nonfinite``), the sweep keeps every point of it and
+    starts a new branch a quarter of the largest step beyond that furthest frequency,
+    as a sweep on a test rig jumps: Newton from the branch's furthest point, else a
+    fresh solution (:func:`start_point`). Where no start converges the gap doubles with
+    each try (the unexplored band grows, but a failed start costs a backlash homotopy,
+    seconds). Each point carries its ``branch`` number and ``restarts`` lists
     where and why, so the frequencies between are known to be unexplored.
 
     **Raises:** ``TrainError`` for a gear where no mesh turns, an impractical ``mu``,
@@ -167,6 +185,8 @@ def sweep(
     min_k = _hb.highest_excitation(system, eta)
     segments = _segments(from_hz, to_hz, mu_ref, min_k, eta, harmonics)
     F_static = static_mesh_forces(system)
+    runaway = RUNAWAY * (np.abs(np.asarray(F_static)) / np.asarray(system.kbar)
+                         + np.asarray(system.backlash))  # RMS mesh deflection limit (m)
     solver = {"method": "harmonic balance", "linear": linear, "eta": eta,
               "segments": [list(s) for s in segments], "reference_stage": ref,
               "max_step_hz": max_step_hz, "cutoff_hz": RESPONSE_CUTOFF_HZ,
@@ -223,7 +243,7 @@ def sweep(
                 seg_stop = _continue_segment(
                     log, j, K, param, None if j in fresh else previous, lam_a, lam_b,
                     settings, cap=max_points - done, f_a=f_a, f_ref=from_hz,
-                    guess=furthest if j in fresh else None,
+                    guess=furthest if j in fresh else None, runaway=runaway,
                     max_detour=max_detour,
                     progress=(lambda i, lam, start=done: progress(start + i + 1, lam * from_hz))
                     if progress else None)
@@ -401,7 +421,7 @@ class _SweepLog:
 
 
 def _continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap, f_a, f_ref,
-                      progress, max_detour=MAX_DETOUR, guess=None):
+                      progress, max_detour=MAX_DETOUR, guess=None, runaway=None):
     """Continue segment ``j`` from ``lam_a`` to ``lam_b`` (at most ``cap`` points), or the
     rest of it after the points ``log`` holds; every point goes to ``log``. The resumed
     state is the saved point with its tangent and step, and the factors of its bordered
@@ -417,9 +437,10 @@ def _continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap
     trace = _segment_trace(have, cap) if have else None
     # the furthest lambda reached and the points since (detour check), over saved points too
     front = {"lam": lam_a, "since": 0}
+    min_advance = MIN_ADVANCE * float(settings.max_dlambda)
 
     def detour(lam):
-        if (lam - front["lam"]) * direction > 0:
+        if (lam - front["lam"]) * direction > min_advance:
             front["lam"], front["since"] = lam, 0
         else:
             front["since"] += 1
@@ -445,6 +466,8 @@ def _continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap
             if trace.revisits(z, t):
                 raise _ClosedLoop
             trace.add(z, t)
+        if runaway is not None and _ran_away(param.problem, y, runaway):
+            return "runaway"
         return "detour" if detour(lam) and (lam - lam_b) * direction < 0 else None
 
     if not have:
@@ -462,6 +485,8 @@ def _continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap
         return "reached_end"
     if trace is not None and trace.closed:
         return "closed_loop"
+    if runaway is not None and _ran_away(param.problem, last["y"], runaway):
+        return "runaway"
     if detoured:
         return "detour"
     if len(have) >= cap:
@@ -545,6 +570,14 @@ def _segments(from_hz, to_hz, mu_ref, min_k, eta, fixed):
     segs[0] = (float(from_hz), segs[0][1], segs[0][2])
     segs[-1] = (segs[-1][0], float(to_hz), segs[-1][2])
     return segs
+
+
+def _ran_away(problem, y, limit) -> bool:
+    """Whether the RMS alternating deflection of a mesh, from the scaled unknowns ``y``,
+    exceeds ``limit`` ``(m,)`` (m): see :data:`RUNAWAY`."""
+    X = np.asarray(y).reshape(problem.shape) * np.asarray(problem.x_scale)
+    deflection = X[1:] @ np.asarray(problem.system.W).T  # cos/sin amplitudes, (2K, m)
+    return bool(np.any(np.sqrt(0.5 * np.sum(deflection ** 2, axis=0)) > limit))
 
 
 def _restart_step(max_step_hz, span_hz) -> float:
