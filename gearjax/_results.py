@@ -197,6 +197,47 @@ def sweep_dataset(
     return xr.Dataset(data, coords=coords, attrs=global_attrs)
 
 
+def add_displacement_harmonics(ds: xr.Dataset, X, dof_labels: Sequence[str],
+                               harmonics, units: str = "rad") -> xr.Dataset:
+    """``ds`` with the member displacement harmonics of its points.
+
+    **Arguments:** ``X``: one ``(2K_p+1, n)`` array of real Fourier coefficients per point
+    (:mod:`gearjax._aft` layout; ``K_p`` may differ between points: the harmonics rule
+    changes K along a sweep); ``dof_labels``: the ``n`` coordinate names (e.g.
+    ``"1.sun"``, ``"2.planet3"``); ``harmonics``: ``(P,)`` the ``K_p``; ``units`` of the
+    coordinates.
+
+    **Adds:** ``displacement_cos`` and ``displacement_sin`` ``(point, dof, harmonic)``:
+    ``x_i(t) = cos[., i, 0] + sum_k cos[., i, k] cos(k w0 t) + sin[., i, k] sin(k w0 t)``,
+    ``w0 = Omega / eta`` (``harmonic`` 0 is the mean; ``sin`` is 0 there); harmonics
+    above a point's ``K_p`` are 0, as in its truncated solution; and ``harmonics``
+    ``(point,)``, the ``K_p``. CSV leaves them out (one row per point and mesh).
+    """
+    P = ds.sizes["point"]
+    K = np.asarray(harmonics, dtype=np.int64)
+    _check("harmonics", K, (P,))
+    n = len(dof_labels)
+    top = int(K.max()) if P else 0
+    cos = np.zeros((P, n, top + 1))
+    sin = np.zeros((P, n, top + 1))
+    for k, Xp in enumerate(X):
+        Xp = _check(f"X[{k}]", np.asarray(Xp, dtype=float), (2 * int(K[k]) + 1, n))
+        cos[k, :, 0] = Xp[0]
+        cos[k, :, 1:K[k] + 1] = Xp[1::2].T
+        sin[k, :, 1:K[k] + 1] = Xp[2::2].T
+    ds = ds.assign_coords(dof=("dof", np.asarray(list(dof_labels), dtype=str)),
+                          harmonic=("harmonic", np.arange(top + 1, dtype=np.int64)))
+    ds["harmonics"] = ("point", K, {"units": "1",
+                                    "long_name": "solution harmonics K of the point"})
+    for name, value, what in (("displacement_cos", cos, "cosine"),
+                              ("displacement_sin", sin, "sine")):
+        ds[name] = (("point", "dof", "harmonic"), value, {
+            "units": units,
+            "long_name": f"{what} coefficient of the member displacement per harmonic of "
+                         "Omega / eta (harmonic 0: the mean)"})
+    return ds
+
+
 def save_results(ds: xr.Dataset, path) -> pathlib.Path:
     """Write ``ds`` to ``path``: NetCDF (h5netcdf engine) for ``.nc``, CSV (one row per
     point and mesh) for ``.csv``; any other suffix is refused with a ``ValueError``.

@@ -1,9 +1,11 @@
 """The gear-train sweep surface: refusals, harmonics rule, a short linear sweep end to end."""
 
+import dataclasses
 import json
 import math
 import warnings
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -75,6 +77,19 @@ def test_linear_sweep_json_and_files(capsys, tmp_path):
     assert fig.stat().st_size > 10_000
     assert all(math.isfinite(m["rms_force"]) for m in p["meshes"])
     assert np.all(ds["converged"].values)
+    # the member displacement harmonics, read back from the file, are the solution:
+    # its mesh responses come out again
+    assert ds["displacement_cos"].dims == ("point", "dof", "harmonic")
+    assert ds.sizes["harmonic"] == 17 and np.all(ds["harmonics"].values == 16)
+    system = dataclasses.replace(gj.assemble(gj.load_train(), "first"), backlash=jnp.zeros(16))
+    problem = gj._hb.hb_problem(system, gj._hb.HarmonicBalance(n_harmonics=16))
+    c, s = ds["displacement_cos"].values[1], ds["displacement_sin"].values[1]
+    assert list(ds["dof"].values[:3]) == list(system.dof_labels[:3]) and np.all(s[:, 0] == 0)
+    X = np.zeros((33, system.n_dof))
+    X[0], X[1::2], X[2::2] = c[:, 0], c[:, 1:].T, s[:, 1:].T
+    resp = gj.mesh_responses(problem, jnp.asarray(X), float(ds["omega"].values[1]),
+                             gj.static_mesh_forces(system))
+    np.testing.assert_allclose(resp.rms_force, ds["rms_force"].values[1], rtol=1e-10)
 
 
 def test_nonlinear_sweep_keeps_mean_load_and_reports_stability(train):

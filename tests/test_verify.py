@@ -66,7 +66,7 @@ def test_verify_linear_paper_first_gear_within_1_percent(capsys, tmp_path):
     assert out["tolerance"] == 0.01 and out["all_ok"] and len(out["points"]) == 2
     for p in out["points"]:
         assert p["result_hb"] == "converged" and p["result_ni"] == "converged"
-        assert p["converged"] and p["ok"] and p["period"] == 1 and p["harmonics"] == 48
+        assert p["converged"] and p["ok"] and p["period"] == 1 and p["harmonics"] == 64
         assert len(p["meshes"]) == 16
         for m in p["meshes"]:
             assert {"name", "rms_hb", "rms_ni", "rel_diff", "ok"} <= set(m)
