@@ -149,7 +149,8 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--proxy-points", type=int, default=256, metavar="N",
                    help="frequencies of the first-order proxy (default 256)")
     c.add_argument("--phase-grid", type=int, default=24, metavar="N",
-                   help="sun-ring phases tried per planet set (default 24)")
+                   help="sun-ring phases (and stage phases, where varied) tried per "
+                        "planet set (default 24)")
     c.add_argument("--screen", type=int, default=24, metavar="N",
                    help="candidates per stage solved by the linear harmonic balance (default 24)")
     c.add_argument("--nonlinear", type=int, default=2, metavar="N",
@@ -628,7 +629,8 @@ def _optimize_cmd(args, train, notes) -> int:
               + "  (continuous: not assemblable)")
     for s in result.stages:
         print(f"stage {s['stage']}: {s['planet_sets']} admissible planet sets"
-              + (f" ({s['screened_sets']} rotation classes)" if s["modulo_rotation"] else "")
+              + f" ({s['screened_sets']} distinct phasings"
+              + (" up to a rotation" if s["modulo_rotation"] else "") + ")"
               + f", {s['linear_screened']} solved linear, {s['nonlinear_swept']} with "
               f"backlash: {s['chosen']}")
     if args.out_train:

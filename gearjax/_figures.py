@@ -284,3 +284,100 @@ def _edges(x: np.ndarray) -> np.ndarray:
         return np.array([x[0] - 0.01, x[0] + 0.01])
     mid = 0.5 * (x[1:] + x[:-1])
     return np.concatenate([[x[0] - (mid[0] - x[0])], mid, [x[-1] + (x[-1] - mid[-1])]])
+
+
+# ------------------------------------------------------------------ designs
+
+
+def design_figure(result, path: str | int = 0, title: str = ""):
+    """A batched design sweep (:class:`~gearjax.DesignSweep`): the peak RMS mesh force
+    over the band against the value of one varied ``path`` (name or index; the other
+    values as they are), and the largest RMS over the meshes against reference-stage mesh
+    frequency for the best and the worst design. **Returns:** the Figure."""
+    k = result.paths.index(path) if isinstance(path, str) else int(path)
+    x = np.asarray(result.thetas)[:, k]
+    peak = np.asarray(result.peak, dtype=float)
+    fig, axes = _figure(10.0, 3.4, 1, 2)
+    ax = axes[0, 0]
+    order = np.argsort(x)
+    ax.plot(x[order], peak[order], "o-", ms=3, lw=1.0, color="k")
+    best, worst = int(np.nanargmin(peak)), int(np.nanargmax(peak))
+    for i, color, name in ((best, "C3", "best"), (worst, "C0", "worst")):
+        ax.plot([x[i]], [peak[i]], "o", ms=7, color=color, label=f"{name}: {peak[i]:.0f} N")
+    ax.set_xlabel(result.paths[k])
+    ax.set_ylabel("peak RMS mesh force over the band (N)", fontsize=8)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    ax = axes[0, 1]
+    f = np.asarray(result.frequencies_hz) / 1e3
+    for i, color, name in ((worst, "C0", "worst"), (best, "C3", "best")):
+        per_f = np.nanmax(np.asarray(result.rms_force)[i], axis=-1)
+        ax.plot(f, per_f, ".-", ms=3, lw=1.0, color=color,
+                label=f"{name}, {result.paths[k]} = {x[i]:.4g}")
+    ax.set_yscale("log")
+    ax.set_xlabel(f"stage {result.reference_stage} mesh frequency (kHz)")
+    ax.set_ylabel("largest RMS mesh force (N)", fontsize=8)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    model = "linear time-varying" if result.linear else "with backlash"
+    fig.suptitle(title or f"{len(x)} designs in one batched call ({model}, K = "
+                 f"{result.harmonics}, {f.size} frequencies)", fontsize=10)
+    return fig
+
+
+def recheck_figure(recheck, title: str = ""):
+    """The re-check of an optimisation (:class:`gearjax._optimize.Recheck`): per stage,
+    the largest RMS force of its meshes along the fresh sweeps with backlash of the
+    baseline (black) and the optimum (red), stable solid (and dots: a stable point
+    between unstable ones shows too) and unstable dotted (off-scale
+    unstable branches clipped at 1.5 times the largest stable value); stars: time
+    integration from each sweep's peak orbit; circles: the integrations of the
+    verification points. **Returns:** the Figure."""
+    colors = {"baseline": "k", "optimum": "C3"}
+    first = next(iter(recheck.sweeps.values())).dataset
+    stages = list(dict.fromkeys(np.asarray(first["stage"]).tolist()))
+    fig, axes = _figure(10.0, 3.0 * len(stages), len(stages), 1, sharex=True)
+    for ax, stage in zip(axes[:, 0], stages):
+        top = 0.0
+        for name, sw in recheck.sweeps.items():
+            ds, color = sw.dataset, colors.get(name, "C2")
+            cols = np.asarray(ds["stage"]) == stage
+            f = np.asarray(ds["mesh_frequency_hz"]) / 1e3
+            y = np.nanmax(np.asarray(ds["rms_force"])[:, cols], axis=1)
+            stable = np.asarray(ds["stable"]) == 1
+            branch = np.asarray(ds["branch"]) if "branch" in ds else np.zeros(f.size, int)
+            for b in np.unique(branch):
+                sel = branch == b
+                ys, st = y[sel], stable[sel]
+                on = st | np.r_[st[1:], False]  # each stable run reaches the next point
+                ax.plot(f[sel], np.where(on, ys, np.nan), "-", lw=1.1, color=color,
+                        label=f"{name}, sweep with backlash" if b == branch[0] else None)
+                ax.plot(f[sel][st], ys[st], ".", ms=2.5, color=color)  # lone stable points
+                ax.plot(f[sel], np.where(~st, ys, np.nan), ":", lw=0.8, color=color,
+                        alpha=0.7, label=f"{name}, unstable" if b == branch[0]
+                        and not np.all(stable) else None)
+            if np.any(stable):
+                top = max(top, float(np.nanmax(y[stable])))
+            if name in recheck.orbits:
+                ni = recheck.orbits[name]
+                yi = np.nanmax(np.asarray(ni["rms_force"])[:, cols], axis=1)
+                ax.plot(np.asarray(ni["mesh_frequency_hz"]) / 1e3, yi, "*", ms=11,
+                        mfc="none", mew=1.3, color=color,
+                        label=f"{name}, integrated from the peak orbit")
+            if name in recheck.verify:
+                ni = recheck.verify[name].ni
+                yi = np.nanmax(np.asarray(ni["rms_force"])[:, cols], axis=1)
+                ax.plot(np.asarray(ni["mesh_frequency_hz"]) / 1e3, yi, "o", ms=7,
+                        mfc="none", mew=1.2, color=color,
+                        label=f"{name}, verify_gear integration")
+        if top > 0:
+            ax.set_ylim(0.0, 1.5 * top)
+        ax.set_title(f"stage {stage} meshes: largest RMS force", fontsize=9)
+        ax.set_ylabel("RMS mesh force (N)", fontsize=8)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=2)
+    axes[-1, 0].set_xlabel(f"stage {first.attrs.get('reference_stage', '')} mesh frequency "
+                           "(kHz)")
+    fig.suptitle(title or f"re-check {recheck.band_hz[0]:g}-{recheck.band_hz[1]:g} Hz: fresh "
+                 "sweeps with backlash and time integration", fontsize=10)
+    return fig

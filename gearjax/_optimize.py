@@ -14,27 +14,38 @@ time origin (shifting it shifts time) and is not a variable.
 apart. Planet 1 is at 0 and the angles increase (canonical order: relabelling planets
 changes nothing), so a set is a composition of ``Z_s + Z_r`` into ``N`` gaps
 ``>= k_min``: 4495 sets for the paper's stage 1 (4 planets, 100 slots, ``k_min`` = 18),
-out of ``C(99, 3)`` = 156849 without the overlap rule. With ``phasing = "physical"``
-rotating a set by one slot multiple and relabelling shifts every mesh phase of the
-stage by the same angle (the assembly rule makes ``Z_r dpsi = -Z_s dpsi`` mod 360),
-i.e. it is the same set with another stage phase; when that stage phase is free (a
-varied ``stage_phase_deg``, or for the time-origin stage, every other turning stage's)
-one set per rotation class is screened (about a quarter).
+out of ``C(99, 3)`` = 156849 without the overlap rule.
+
+**Distinct designs** (:func:`phasing_classes`): the torsional model sees a planet only
+through its mesh phases ``Z_s psi_i`` and ``Z_r psi_i`` modulo 360 deg, so sets with the
+same multiset of slot residues ``Z_s k_i mod (Z_s + Z_r)`` are one design (relabelled):
+the paper's 4495 stage-1 sets are 220 designs (``Z_s = 30`` on 100 slots: 10 residues),
+its 67525 stage-2 sets 5456. One set per class is screened, the best-balanced one (the
+planets' centre of mass nearest the carrier axis). With ``phasing = "physical"``
+rotating a set by a slot multiple and relabelling shifts every mesh phase of the stage
+by the same angle (the assembly rule makes ``Z_r dpsi = -Z_s dpsi`` mod 360): the same
+set with another stage phase. Where the stage phase is varied, it is screened on the
+same grid as the sun-ring phase and sets that differ by a rotation are one class
+(73 and 1496 for the paper's stages).
 
 **Objective:** the largest RMS of the alternating mesh force (N) over the band's
 frequencies and the gear's meshes. Ties are broken by the next largest per-frequency
 peaks (:func:`leximax_order`): a stage's phasing cannot lower a peak that another
-stage's excitation sets, and then the rest of the band decides. Stages are optimised
+stage's excitation sets, and then the rest of the band decides. Profiles within
+:data:`RANK_RTOL` (0.1%) are equal; the better-balanced planet set wins the tie
+(:func:`planet_imbalance`: an unequally spaced set puts a rotating unbalance on the
+carrier), and the incumbent is kept unless a candidate beats it by more. Stages are optimised
 one at a time, in file order (``passes`` times); the incumbent (the current design) is
 always a candidate, so no step makes the objective worse on the model that decides it.
 Three models, cheapest first:
 
-1. *proxy*, every admissible set x a grid of sun-ring phases: the forced response to
-   first order in the stiffness variation, ``F_o = (I - D_o W H(o Omega) W^T) q_o``
-   per excitation order ``o`` (``q_o = kbar kappa_o p_static - (kbar + i o Omega c)
-   e_o``, ``H`` the mean-stiffness receptance, ``D_o = diag(kbar + i o Omega c)``):
-   the phasing cancellation of every stiffness harmonic weighted by the modes it
-   drives, with the transfer matrices computed once (phasing does not change them);
+1. *proxy*, every distinct set x a grid of sun-ring (and stage) phases: the forced
+   response to first order in the stiffness variation,
+   ``F_o = (I - D_o W H(o Omega) W^T) q_o`` per excitation order ``o``
+   (``q_o = kbar kappa_o p_static - (kbar + i o Omega c) e_o``, ``H`` the
+   mean-stiffness receptance, ``D_o = diag(kbar + i o Omega c)``): the phasing
+   cancellation of every stiffness harmonic weighted by the modes it drives, with the
+   transfer matrices computed once (phasing does not change them);
 2. *linear*: the ``screen`` best sets by the linear, time-varying harmonic balance
    (:mod:`gearjax._design`: parametric coupling kept, no backlash), batched;
 3. *non-linear*: the ``nonlinear`` best by sweeps with backlash
@@ -47,7 +58,17 @@ Three models, cheapest first:
 The continuous relaxation (planet angles continuous, non-overlapping through a softmax
 of the gaps, phases continuous; the assembly rule dropped, so it cannot be built)
 minimises the smooth peak (log-sum-exp) of the linear model by L-BFGS with
-``jax.grad`` from the optimum, for comparison.
+``jax.grad`` from the optimum, for comparison, at the resonance frequencies
+(:func:`resonance_frequencies`: where an excitation order meets a natural frequency,
+which the phasing does not move) and the optimum's screen grid. The objective
+oscillates in the angles (a planet moved by ``360 / Z_s`` deg brings its phases back),
+so this is a local optimum next to the discrete one. Baseline, optimum and relaxation
+are compared on one grid: ``final_points`` geometric frequencies, the resonance
+frequencies and each design's proxy peaks.
+
+:func:`recheck` re-checks baseline and optimum independently: fresh sweeps with backlash
+(the sweep's own harmonics), time integration from their peak orbits and
+:func:`gearjax.verify_gear` at the peak frequencies.
 """
 
 from __future__ import annotations
@@ -78,6 +99,11 @@ MAX_SETS = 2_000_000
 """Largest number of admissible planet sets enumerated (more: refused with a message)."""
 TIE_DEPTH = 8
 """How many of the band's largest values break ties (:func:`leximax_order`)."""
+RANK_RTOL = 1e-3
+"""Candidates whose band profiles (:func:`leximax_order`) agree within this (relative)
+count as equal on the proxy and the linear model; the better-balanced planet set
+(:func:`planet_imbalance`) goes first, then the earlier one (the incumbent before any
+candidate: a change must lower the objective by more than this)."""
 NONLINEAR_RTOL = 1e-3
 """Peaks of sweeps with backlash closer than this (relative) count as equal."""
 MAX_DLF = 50.0
@@ -160,6 +186,57 @@ def planet_set_ok(stage, angles_deg) -> bool:
     return bool(a.size == stage.n_planets and a[0] == 0 and np.all(np.diff(a) > 0)
                 and a[-1] < 360 and assembly_ok(stage, a)
                 and overlapping_planets(stage, a) is None)
+
+
+def phasing_classes(stage, sets, *, modulo_shift: bool = False) -> tuple[np.ndarray,
+                                                                           np.ndarray]:
+    """Group planet sets ``(S, N)`` (deg) of ``stage`` that the model cannot tell apart.
+
+    Planet positions enter the (torsional) model only through the mesh phases
+    ``Z_s psi_i`` and ``Z_r psi_i`` modulo 360 deg (model.md, phasing), and relabelling
+    identical planets changes nothing: two sets with the same multiset of slot residues
+    ``(Z_s k_i mod S, Z_r k_i mod S)`` (``k_i`` the slot of planet ``i``, ``S = Z_s + Z_r``)
+    are the same design. The paper's stage 1 (``Z_s = 30``, 100 slots) has only 10
+    residues: its 4495 admissible sets are 220 designs. ``modulo_shift``: also one class
+    for residue multisets that differ by a common shift (a rotated set: the same design
+    with another stage phase, when that stage phase is screened too).
+
+    **Returns:** ``(representatives, sizes)``: the index into ``sets`` of one set per
+    class (the best-balanced one, smallest ``|sum_i exp(i psi_i)|``: the planets'
+    centre of mass nearest the carrier axis, then the widest smallest gap, then the
+    first), in order of first appearance, and how many sets each class holds.
+    """
+    sets = np.asarray(sets, dtype=float)
+    S = assembly_slots(stage)
+    k = np.rint(sets * S / 360.0).astype(np.int64)
+    sun = (stage.teeth.sun * k) % S
+    ring = (stage.teeth.ring * k) % S
+    shifts = [0]
+    classes: dict[tuple, list[int]] = {}
+    for i in range(len(sets)):
+        pairs = list(zip(sun[i].tolist(), ring[i].tolist()))
+        if modulo_shift:
+            shifts = pairs
+        key = min(tuple(sorted(((a - da) % S, (b - db) % S) for a, b in pairs))
+                  for da, db in (shifts if modulo_shift else [(0, 0)]))
+        classes.setdefault(key, []).append(i)
+    psi = np.deg2rad(sets)
+    imbalance = np.abs(np.sum(np.exp(1j * psi), axis=1))
+    gaps = np.diff(np.concatenate([sets, np.full((len(sets), 1), 360.0)], axis=1), axis=1)
+    reps, sizes = [], []
+    for members in classes.values():
+        m = np.asarray(members)
+        order = np.lexsort((m, -np.round(gaps[m].min(axis=1), 9), np.round(imbalance[m], 9)))
+        reps.append(int(m[order[0]]))
+        sizes.append(len(members))
+    return np.asarray(reps, dtype=np.int64), np.asarray(sizes, dtype=np.int64)
+
+
+def planet_imbalance(angles_deg) -> float:
+    """``|sum_i exp(i psi_i)| / N``: the planets' centre of mass off the carrier axis, as a
+    share of the carrier radius (0 for a balanced set such as equal spacing)."""
+    a = np.deg2rad(np.asarray(angles_deg, dtype=float))
+    return float(np.abs(np.sum(np.exp(1j * a))) / max(a.size, 1))
 
 
 # --------------------------------------------------------------------- variables
@@ -358,12 +435,14 @@ def first_order_rms(fo: FirstOrder, system) -> Array:
 
 
 @eqx.filter_jit
-def _proxy_chunk(fo: FirstOrder, family, thetas, gammas, idx, h, cols_s, cols_r, fixed,
-                 rest, mask, depth: int):
+def _proxy_chunk(fo: FirstOrder, family, thetas, phases, idx, h, h_stage, cols_s, cols_r,
+                 fixed, rest, mask, depth: int):
     """Band profiles ``(b, G, depth)`` (:func:`band_profile`) of a chunk of planet sets at
-    the sun-ring phases ``gammas`` (rad): ``F_o = fixed_o + A_o + exp(i h_o gamma) B_o``
-    with ``A``, ``B`` the shares of the stage's sun and ring meshes (at gamma = 0) and
-    ``rest`` the squared RMS of the orders the stage does not excite."""
+    the phase pairs ``phases`` ``(G, 2)`` (sun-ring phase gamma, stage phase Gamma; rad):
+    ``F_o = fixed_o + exp(i h'_o Gamma) (A_o + exp(i h_o gamma) B_o)`` with ``A``, ``B``
+    the shares of the stage's sun and ring meshes (at gamma = Gamma = 0), ``h'`` the
+    stage phase's multiplier (``h``, or 1 with ``phasing = "paper"``) and ``rest`` the
+    squared RMS of the orders the stage does not excite."""
     o = jnp.asarray(fo.orders, dtype=float)[idx]
     T = fo.transfer[:, idx]  # (F, On, m, m)
     io_w = 1j * fo.omegas[:, None] * o[None, :]  # (F, On)
@@ -375,26 +454,33 @@ def _proxy_chunk(fo: FirstOrder, family, thetas, gammas, idx, h, cols_s, cols_r,
         A = jnp.einsum("foij,foj->foi", T[..., cols_s], q[..., cols_s])
         B = jnp.einsum("foij,foj->foi", T[..., cols_r], q[..., cols_r])
 
-        def at_gamma(gamma):
-            F = fixed + A + jnp.exp(1j * h * gamma)[None, :, None] * B
+        def at_phase(pair):
+            gamma, stage_phase = pair[0], pair[1]
+            F = fixed + jnp.exp(1j * h_stage * stage_phase)[None, :, None] * (
+                A + jnp.exp(1j * h * gamma)[None, :, None] * B)
             rms = jnp.sqrt(jnp.sum(jnp.abs(F) ** 2, axis=1) / 2 + rest)  # (F, m)
             per_f = jnp.max(jnp.where(mask[None, :], rms, -jnp.inf), axis=1)
             return jax.lax.top_k(per_f, depth)[0]
 
-        return jax.lax.map(at_gamma, gammas)
+        return jax.lax.map(at_phase, phases)
 
     return jax.vmap(one)(thetas)
 
 
 def proxy_screen(train: Train, gear: str, stage_id: str, sets, gammas_deg, omegas,
-                 mesh_mask, chunk: int = 64, depth: int = TIE_DEPTH) -> np.ndarray:
+                 mesh_mask, chunk: int = 64, depth: int = TIE_DEPTH,
+                 stage_phases_deg=None) -> np.ndarray:
     """First-order band profiles ``(S, G, depth)`` (N; :func:`band_profile`: the largest
     per-frequency peaks, descending) of planet sets ``sets`` ``(S, N)`` (deg) of
     stage ``stage_id`` at sun-ring phases ``gammas_deg`` ``(G,)``, over the base
-    frequencies ``omegas`` (rad/s) and the meshes of ``mesh_mask`` ``(m,)``. Every other
-    value is ``train``'s. One compilation per ``chunk``."""
+    frequencies ``omegas`` (rad/s) and the meshes of ``mesh_mask`` ``(m,)``; with
+    ``stage_phases_deg`` ``(P,)`` also at each of these stage phases of the stage:
+    ``(S, G, P, depth)``. Every other value is ``train``'s. One compilation per
+    ``chunk``."""
     N = train.stage(stage_id).n_planets
     base = set_path(train, f"{stage_id}.sun_ring_phase_deg", 0.0)
+    if stage_phases_deg is not None:
+        base = set_path(base, f"{stage_id}.stage_phase_deg", 0.0)
     paths = [f"{stage_id}.planet_angles_deg.{i}" for i in range(2, N + 1)]
     family = GearFamily.of(base, paths, gear, linear=True)
     sets = np.asarray(sets, dtype=float).reshape(-1, N)
@@ -406,6 +492,7 @@ def proxy_screen(train: Train, gear: str, stage_id: str, sets, gammas_deg, omega
     sun = in_stage & ~ring
     idx = np.asarray([j for j, o in enumerate(fo.orders) if o % mu_n == 0], dtype=int)
     h = jnp.asarray([fo.orders[j] // mu_n for j in idx], dtype=float)
+    h_stage = h if train.phasing == "physical" else jnp.ones_like(h)
     # the fixed part: every other mesh's excitation, and the forcing
     a, b = excitation(fo, system.k_cos, system.k_sin, system.te_cos, system.te_sin)
     o = jnp.asarray(fo.orders, dtype=float)
@@ -415,7 +502,11 @@ def proxy_screen(train: Train, gear: str, stage_id: str, sets, gammas_deg, omega
     others = np.setdiff1d(np.arange(len(fo.orders)), idx)
     rest = jnp.sum(jnp.abs(F_other[:, others]) ** 2, axis=1) / 2
     fixed = F_other[:, idx]
-    gam = jnp.deg2rad(jnp.asarray(gammas_deg, dtype=float))
+    gammas = np.asarray(gammas_deg, dtype=float).reshape(-1)
+    stage_phases = np.zeros(1) if stage_phases_deg is None else np.asarray(
+        stage_phases_deg, dtype=float).reshape(-1)
+    pairs = np.stack(np.meshgrid(gammas, stage_phases, indexing="ij"), axis=-1).reshape(-1, 2)
+    phases = jnp.deg2rad(jnp.asarray(pairs))
     mask = jnp.asarray(np.asarray(mesh_mask, dtype=bool))
     cols_s, cols_r = np.flatnonzero(sun), np.flatnonzero(ring)
     thetas = sets[:, 1:]
@@ -425,10 +516,12 @@ def proxy_screen(train: Train, gear: str, stage_id: str, sets, gammas_deg, omega
         n = len(part)
         if n < chunk:
             part = np.concatenate([part, np.repeat(part[-1:], chunk - n, axis=0)])
-        peaks = _proxy_chunk(fo, family, jnp.asarray(part), gam, idx, h, cols_s, cols_r,
-                             fixed, rest, mask, min(depth, len(fo.omegas)))
+        peaks = _proxy_chunk(fo, family, jnp.asarray(part), phases, idx, h, h_stage, cols_s,
+                             cols_r, fixed, rest, mask, min(depth, len(fo.omegas)))
         out.append(np.asarray(peaks)[:n])
-    return np.concatenate(out)
+    out = np.concatenate(out)
+    shape = (len(sets), len(gammas)) + (() if stage_phases_deg is None else (len(stage_phases),))
+    return out.reshape(shape + out.shape[-1:])
 
 
 def assemble_at(train: Train, gear: str):
@@ -588,8 +681,10 @@ class Relaxation:
     """The continuous relaxation: ``values`` (path -> value, deg); ``start_peak`` (N, the
     optimum's on the relaxation's grid), ``linear_peak`` and ``linear_rms`` ``(F, m)``
     (N, on the result's common grid), ``smooth_start``, ``smooth_end`` (the smooth peak
-    it minimised), ``iterations``, ``message`` (L-BFGS); ``assembly_violations``:
-    planets off an assembly slot (it is not assemblable)."""
+    it minimised), ``iterations``, ``message`` (L-BFGS; where the peak on its grid did
+    not fall, the start is kept and the message says so); ``assembly_violations``:
+    planets off an assembly slot (it is not assemblable); ``max_slot_offset``: the
+    largest distance of a planet from its nearest slot (slots, at most 0.5)."""
 
     values: dict
     start_peak: float
@@ -599,6 +694,7 @@ class Relaxation:
     iterations: int
     message: str
     assembly_violations: int
+    max_slot_offset: float
     linear_rms: np.ndarray | None
 
 
@@ -611,17 +707,19 @@ class OptimizeSettings:
 
     **Fields:** ``proxy_points``: frequency grid of the first-order proxy;
     ``phase_grid``: sun-ring phases tried per planet set (``360 / phase_grid`` deg
-    apart); ``screen``: best proxy candidates per stage solved by the linear,
-    time-varying harmonic balance; ``screen_points``: its frequencies per candidate (half
-    geometric, half the candidate's highest proxy peaks); ``final_points``: geometric
-    frequencies of the common grid the baseline, optimum and relaxation are compared on
-    (plus their proxy peaks);
+    apart), and as many stage phases where the stage phase is varied; ``screen``: best
+    proxy candidates per stage solved by the linear, time-varying harmonic balance;
+    ``screen_points``: its frequencies per candidate (half geometric, half the
+    candidate's highest proxy peaks); ``final_points``: geometric frequencies of the
+    common grid the baseline, optimum and relaxation are compared on (plus the resonance
+    frequencies and their proxy peaks);
     ``harmonics``: its K (``None``: the highest excitation order, so every stiffness
     harmonic is resolved); ``nonlinear``: best linear candidates per stage swept with
     backlash (0: decide on the linear model); ``nonlinear_harmonics``: K of those sweeps
     (``None``: ``harmonics``); ``max_step_hz``, ``max_points`` (continuation points per
     sweep), ``restarts``: of the sweeps (:func:`nonlinear_band`); ``relax_iterations``:
-    L-BFGS iterations of the continuous relaxation (0: skip it); ``temperature``: of its smooth peak (relative); ``passes``:
+    L-BFGS iterations of the continuous relaxation (0: skip it); ``temperature``: of its
+    smooth peak (relative); ``passes``:
     rounds over the stages (a later stage's choice can unpin an earlier one's peak);
     ``chunk``: proxy designs per compiled call; ``devices``: shard the linear screen's
     designs across these (:mod:`gearjax._design`).
@@ -873,16 +971,24 @@ def optimize(
             stages_info.append({"pass": k + 1, **info})
     relaxation, relaxed_theta = None, None
     theta_opt = theta_of(current, paths)
+    # where the linear peaks of any phasing sit: in the relaxation's grid and the common one
+    f_res = resonance_frequencies(nominal, screen.fo.orders, mu_ref, lo, hi)
     if settings.relax_iterations:
-        say("optimize: continuous relaxation (gradient descent on the linear model)")
-        relaxation, relaxed_theta = relax(current, variables, paths, screen,
-                                          screen.grids(theta_opt[None])[0], settings)
+        f_relax = np.unique(np.concatenate([f_res, screen.grids(theta_opt[None])[0]]))
+        say(f"optimize: continuous relaxation (L-BFGS on the linear model at {f_relax.size} "
+            "frequencies: the resonances and the optimum's screen grid)")
+        t0 = time.perf_counter()
+        relaxation, relaxed_theta = relax(current, variables, paths, screen, f_relax, settings,
+                                          model="linear")
+        say(f"optimize: relaxation: {relaxation.iterations} iterations in "
+            f"{time.perf_counter() - t0:.1f} s ({relaxation.message})")
     # the common grid of the reported linear peaks
     finals = [theta_of(train, paths), theta_opt] + (
         [relaxed_theta] if relaxed_theta is not None else [])
     per_f = np.max(screen.proxy(np.asarray(finals)), axis=-1)
     peaks = np.concatenate([screen.f_proxy[peak_indices(row, n_peaks)] for row in per_f])
-    f_final = np.unique(np.concatenate([np.geomspace(lo, hi, settings.final_points), peaks]))
+    f_final = np.unique(np.concatenate([np.geomspace(lo, hi, settings.final_points), peaks,
+                                        f_res]))
     say(f"optimize: baseline and optimum{' and relaxation' if relaxation else ''} on a "
         f"common grid of {f_final.size} frequencies")
     final_rms = screen.rms(np.asarray(finals), np.broadcast_to(f_final, (len(finals),
@@ -894,7 +1000,8 @@ def optimize(
         relaxation = dataclasses.replace(relaxation, linear_peak=float(np.nanmax(final_rms[2])),
                                          linear_rms=final_rms[2])
         say(f"optimize: relaxed peak {relaxation.linear_peak:.1f} N (linear; not "
-            f"assemblable: {relaxation.assembly_violations} planets off a slot)")
+            f"assemblable: {relaxation.assembly_violations} planets off a slot, up to "
+            f"{relaxation.max_slot_offset:.2f} slot)")
     say(f"optimize: peak {baseline.linear_peak:.1f} -> {optimum.linear_peak:.1f} N (linear)"
         + (f", {baseline.nonlinear_peak:.1f} -> {optimum.nonlinear_peak:.1f} N (backlash)"
            if base_nl is not None else ""))
@@ -915,46 +1022,57 @@ def _optimise_stage(current, gear, v, variables, kin, paths, screen, to_omega, s
     sid = v.stage
     st = current.stage(sid)
     everywhere = np.ones(len(groups), dtype=bool)
-    # candidates: planet sets x sun-ring phases (the proxy picks the phase per set)
-    rotation = v.planets and _rotation_free(current, kin, v, variables)
+    # candidates: planet sets x sun-ring phases x stage phases (the proxy picks the phases
+    # per set); one set per class of sets the model cannot tell apart
+    shift = bool(v.planets and v.stage_phase and current.phasing == "physical")
     if v.planets:
-        sets = admissible_planet_sets(st, modulo_rotation=rotation)
-        n_all = count_planet_sets(st)
+        every = admissible_planet_sets(st)
+        reps, sizes = phasing_classes(st, every, modulo_shift=shift)
+        sets = every[reps]
+        n_all = len(every)
     else:
         sets = np.asarray(st.planet_angles_deg, float)[None]
         n_all = 1
-    gamma0 = float(st.sun_ring_phase_deg)
-    gammas = (gamma0 + 360.0 * np.arange(settings.phase_grid) / settings.phase_grid
-              if v.sun_ring else np.array([gamma0])) % 360.0
+    grid = 360.0 * np.arange(settings.phase_grid) / settings.phase_grid
+    gamma0, phase0 = float(st.sun_ring_phase_deg), float(st.stage_phase_deg)
+    gammas = (gamma0 + grid if v.sun_ring else np.array([gamma0])) % 360.0
+    phases = (phase0 + grid if v.stage_phase else np.array([phase0])) % 360.0
     t0 = time.perf_counter()
     proxy = proxy_screen(current, gear, sid, sets, gammas, to_omega(screen.f_proxy),
-                         everywhere, settings.chunk)  # (S, G, depth)
+                         everywhere, settings.chunk,
+                         stage_phases_deg=phases if v.stage_phase else None)
+    proxy = proxy.reshape(len(sets), len(gammas) * len(phases), -1)  # (S, G P, depth)
     best_g = np.asarray([leximax_order(p)[0] for p in proxy])
     proxy_best = proxy[np.arange(len(sets)), best_g]  # (S, depth)
-    order = leximax_order(proxy_best)
-    say(f"optimize: stage {sid}: {len(sets)} planet sets"
-        + (f" (one per rotation class of {n_all})" if rotation else "")
-        + f" x {len(gammas)} sun-ring phases by the first-order proxy in "
-        f"{time.perf_counter() - t0:.1f} s; best peak {proxy_best[order[0], 0]:.1f} N")
+    gamma_of = gammas[best_g // len(phases)]
+    phase_of = phases[best_g % len(phases)]
+    balance = np.asarray([planet_imbalance(a) for a in sets])
+    order = leximax_order(proxy_best, RANK_RTOL, tie=np.round(balance, 6))
+    say(f"optimize: stage {sid}: {n_all} planet sets, {len(sets)} distinct phasings"
+        + (" up to a rotation" if shift else "") + f", x {len(gammas)} sun-ring"
+        + (f" x {len(phases)} stage" if v.stage_phase else "")
+        + f" phases by the first-order proxy in {time.perf_counter() - t0:.1f} s; best peak "
+        f"{proxy_best[order[0], 0]:.1f} N")
     top = order[:settings.screen]
-    cands = [_with_stage(current, v, sets[c], gammas[best_g[c]]) for c in top]
+    cands = [_with_stage(current, v, sets[c], gamma_of[c], phase_of[c]) for c in top]
     t0 = time.perf_counter()
     thetas = np.asarray([theta_of(t, paths) for t in [current] + cands])
     rms = screen.rms(thetas, screen.grids(thetas))
     profile = band_profile(rms)
     lin_stage = peak_of(rms, groups == sid)
     lin_all = peak_of(rms)
-    ranking = leximax_order(profile)  # 0 is the incumbent
+    ranking = leximax_order(  # 0 is the incumbent; a tie goes to the better-balanced set
+        profile, RANK_RTOL, tie=np.round([planet_imbalance(t.stage(sid).planet_angles_deg)
+                                          for t in [current] + cands], 6))
     say(f"optimize: stage {sid}: {len(top)} candidates by the linear harmonic balance in "
         f"{time.perf_counter() - t0:.1f} s; best peak {lin_all[ranking[0]]:.1f} N "
         f"(incumbent {lin_all[0]:.1f} N)")
-    rows.append(_row(sid, st.planet_angles_deg, gamma0, st.stage_phase_deg, math.nan,
+    rows.append(_row(sid, st.planet_angles_deg, gamma0, phase0, math.nan,
                      lin_stage[0], lin_all[0], incumbent=True))
     row_of = [len(rows) - 1]
     for rank, c in enumerate(order):
         lin = (lin_stage[1 + rank], lin_all[1 + rank]) if rank < len(top) else (math.nan,) * 2
-        rows.append(_row(sid, sets[c], gammas[best_g[c]], st.stage_phase_deg,
-                         proxy_best[c, 0], *lin))
+        rows.append(_row(sid, sets[c], gamma_of[c], phase_of[c], proxy_best[c, 0], *lin))
         if rank < len(top):
             row_of.append(len(rows) - 1)
     better = [int(i) for i in ranking[:int(np.flatnonzero(ranking == 0)[0])]
@@ -994,11 +1112,14 @@ def _optimise_stage(current, gear, v, variables, kin, paths, screen, to_omega, s
     else:
         t = cands[pick - 1]
         chosen = (f"{_show_set(t.stage(sid).planet_angles_deg)}, sun-ring "
-                  f"{float(t.stage(sid).sun_ring_phase_deg):.1f} deg")
+                  f"{float(t.stage(sid).sun_ring_phase_deg):.1f} deg"
+                  + (f", stage phase {float(t.stage(sid).stage_phase_deg):.1f} deg"
+                     if v.stage_phase else ""))
         new = (t, new_nl)
     say(f"optimize: stage {sid}: {chosen}")
     info = {"stage": sid, "planet_sets": int(n_all), "screened_sets": int(len(sets)),
-            "modulo_rotation": bool(rotation), "sun_ring_phases": int(len(gammas)),
+            "modulo_rotation": shift, "sun_ring_phases": int(len(gammas)),
+            "stage_phases": int(len(phases)),
             "linear_screened": int(len(top)), "nonlinear_swept": swept, "chosen": chosen}
     return (*new, info)
 
@@ -1011,11 +1132,12 @@ def band_profile(rms, depth: int = TIE_DEPTH) -> np.ndarray:
     return np.where(np.isfinite(out), out, np.nan)
 
 
-def leximax_order(profiles, rtol: float = 1e-6) -> np.ndarray:
+def leximax_order(profiles, rtol: float = 1e-6, tie=None) -> np.ndarray:
     """Indices of the rows of ``profiles`` ``(B, k)`` (each descending: the largest
     values of a response over the band) from best to worst: by the peak, ties (within
-    ``rtol`` of the largest value) broken by the next largest value, and so on. Rows
-    with a NaN peak go last.
+    ``rtol`` of the largest value) broken by the next largest value, and so on; rows
+    still tied go by ``tie`` ``(B,)`` (smaller first), then by index. Rows with a NaN
+    peak go last.
 
     Why: a stage's phasing cannot lower a peak that another stage's excitation sets (a
     torsional mode driven by the other stage loads every ring mesh alike); the peak then
@@ -1025,29 +1147,21 @@ def leximax_order(profiles, rtol: float = 1e-6) -> np.ndarray:
     p = p.reshape(p.shape[0], -1)
     scale = np.nanmax(np.abs(p)) if np.any(np.isfinite(p)) else 1.0
     q = np.where(np.isfinite(p), np.round(p / (rtol * (scale or 1.0))), np.inf)
-    return np.lexsort(tuple(q[:, k] for k in range(q.shape[1] - 1, -1, -1)))
+    keys = [q[:, k] for k in range(q.shape[1] - 1, -1, -1)]
+    if tie is not None:
+        keys.insert(0, np.asarray(tie, dtype=float))
+    return np.lexsort(tuple(keys))
 
 
-def _rotation_free(train, kin, v: StageVariables, variables) -> bool:
-    """Whether a rotated planet set of ``v.stage`` is the same design (module docstring)."""
-    if train.phasing != "physical":
-        return False
-    turning = [s.id for s in kin.stages if s.turning]
-    free = {w.stage for w in variables if w.stage_phase}
-    if v.stage != turning[0]:
-        return v.stage in free
-    if any(g_.input_torque_ripple.shape[0] for g_ in train.gears):
-        return False
-    return all(sid in free for sid in turning[1:])
-
-
-def _with_stage(train, v: StageVariables, angles, gamma):
+def _with_stage(train, v: StageVariables, angles, gamma, stage_phase=None):
     t = train
     if v.planets:
         for i, a in enumerate(np.asarray(angles, float)[1:], start=2):
             t = set_path(t, f"{v.stage}.planet_angles_deg.{i}", float(a), "--vary")
     if v.sun_ring:
         t = set_path(t, f"{v.stage}.sun_ring_phase_deg", float(gamma), "--vary")
+    if v.stage_phase and stage_phase is not None:
+        t = set_path(t, f"{v.stage}.stage_phase_deg", float(stage_phase), "--vary")
     return t
 
 
@@ -1126,8 +1240,27 @@ def _check_settings(s: OptimizeSettings) -> None:
 # ------------------------------------------------------------------------ relaxation
 
 
+def _wrap_deg(x) -> float:
+    """``x`` (deg) in ``[0, 360)``, with values a rounding error below 360 as 0."""
+    v = float(x) % 360.0
+    return 0.0 if v > 360.0 - 1e-9 else v
+
+
+def resonance_frequencies(system, orders, mu_ref: int, lo: float, hi: float) -> np.ndarray:
+    """Reference-stage mesh frequencies (Hz) in ``[lo, hi]`` where an excitation of base
+    order ``o`` meets an elastic natural frequency ``f_k`` of the mean-stiffness model,
+    ``mu_ref f_k / o``: where every linear peak of every phasing sits (the phasing
+    changes how hard a mode is driven, not where), sorted."""
+    from ._modal import modes
+
+    hz = np.asarray([m.hz for m in modes(system).modes if m.cls == "elastic"], dtype=float)
+    f = np.asarray([mu_ref * fk / o for fk in np.unique(np.round(hz, 6)) for o in orders
+                    if o > 0], dtype=float)
+    return np.unique(np.round(f[(f >= lo) & (f <= hi)], 6))
+
+
 def relax(train: Train, variables, paths, screen: _Screen, freqs_hz,
-          settings: OptimizeSettings) -> tuple[Relaxation, np.ndarray]:
+          settings: OptimizeSettings, model: str = "proxy") -> tuple[Relaxation, np.ndarray]:
     """Minimise the smooth peak of the linear model at ``freqs_hz`` over continuous planet
     angles (gaps kept above the overlap limit) and phases, from ``train``'s values, by
     L-BFGS with gradients from ``jax.grad`` (module docstring). **Returns:**
@@ -1145,8 +1278,13 @@ def relax(train: Train, variables, paths, screen: _Screen, freqs_hz,
     family, hb_settings = screen.family, screen.settings
     omegas = jnp.asarray(screen.to_omega(np.asarray(freqs_hz, dtype=float)))
 
-    def rms_of(z):
-        return batched_rms(family, mapping(z)[None], omegas, hb_settings, solver="linear")[0]
+    if model == "proxy":
+        def rms_of(z):
+            return first_order_rms(screen.fo, family(mapping(z)))
+    else:
+        def rms_of(z):
+            return batched_rms(family, mapping(z)[None], omegas, hb_settings,
+                               solver="linear")[0]
 
     hard = jax.jit(lambda z: jnp.max(rms_of(z)))
     peak0 = float(hard(jnp.asarray(z0)))
@@ -1161,20 +1299,24 @@ def relax(train: Train, variables, paths, screen: _Screen, freqs_hz,
     s0 = fun(z0)[0]
     res = scipy.optimize.minimize(fun, z0, jac=True, method="L-BFGS-B",
                                   options={"maxiter": settings.relax_iterations})
-    z = res.x if res.fun <= s0 else z0
+    message = str(res.message)
+    z = res.x
+    if not (res.fun <= s0 and float(hard(jnp.asarray(z))) <= peak0):
+        z, message = z0, f"no descent of the peak, start kept ({message})"
     theta = np.asarray(mapping(jnp.asarray(z)))
-    values = {p: float(x) % 360.0 for p, x in zip(paths, theta)}
+    values = {p: _wrap_deg(x) for p, x in zip(paths, theta)}
     relaxed = train_at(train, paths, [values[p] for p in paths])
-    off = 0
+    off, worst = 0, 0.0
     for v in variables:
         if v.planets:
             a = np.asarray(relaxed.stage(v.stage).planet_angles_deg, float)
             q = assembly_slots(relaxed.stage(v.stage)) * a / 360.0
             off += int(np.sum(np.abs(q - np.round(q)) > 1e-6))
+            worst = max(worst, float(np.max(np.abs(q - np.round(q)))))
     return Relaxation(values=values, start_peak=peak0, linear_peak=float(hard(jnp.asarray(z))),
                       smooth_start=float(s0), smooth_end=float(min(res.fun, s0)),
-                      iterations=int(res.nit), message=str(res.message),
-                      assembly_violations=off, linear_rms=None), theta
+                      iterations=int(res.nit), message=message,
+                      assembly_violations=off, max_slot_offset=worst, linear_rms=None), theta
 
 
 # ----------------------------------------------------------------- results, JSON
@@ -1231,12 +1373,47 @@ def optimize_json(result: OptimizeResult) -> dict:
         "relaxation": None if r is None else {
             "values": r.values, "linear_peak": r.linear_peak, "start_peak": r.start_peak,
             "iterations": r.iterations, "message": r.message, "assemblable": False,
-            "assembly_violations": r.assembly_violations},
+            "assembly_violations": r.assembly_violations,
+            "max_slot_offset": r.max_slot_offset},
         "stages": result.stages,
         "candidates": rows,
         "settings": _settings_dict(result.settings),
         "seconds": result.seconds,
     }
+
+
+def optimize_frame(result: OptimizeResult):
+    """Baseline, optimum and relaxation side by side: a ``pandas.DataFrame`` with one row
+    per design and the columns ``linear peak (N)`` (common grid), ``backlash peak (N)``
+    (stable points of the sweeps; NaN where not swept), the linear peak of each stage's
+    meshes, each varied stage's planet angles (deg), planet imbalance
+    (:func:`planet_imbalance`), sun-ring and stage phases (deg), and ``assemblable``."""
+    import pandas as pd
+
+    b, o, r = result.baseline, result.optimum, result.relaxation
+    stages = list(dict.fromkeys(result.mesh_stage))
+    rows = {}
+    designs = [("baseline", b.values, b.linear_rms, b.nonlinear_peak, b.admissible),
+               ("optimum", o.values, o.linear_rms, o.nonlinear_peak, o.admissible)]
+    if r is not None:
+        designs.append(("relaxed", r.values, r.linear_rms, math.nan, False))
+    for name, values, rms, nl, ok in designs:
+        row = {"linear peak (N)": float(np.nanmax(rms)), "backlash peak (N)": nl}
+        for sid in stages:
+            cols = np.asarray(result.mesh_stage) == sid
+            row[f"stage {sid} linear peak (N)"] = float(np.nanmax(rms[:, cols]))
+        for sid in stages:
+            angles = [0.0] + [values[p] for p in values
+                              if p.startswith(f"{sid}.planet_angles_deg.")]
+            if len(angles) > 1:
+                row[f"{sid}.planet_angles_deg"] = np.round(angles, 3).tolist()
+                row[f"{sid} imbalance"] = planet_imbalance(angles)
+            for key in ("sun_ring_phase_deg", "stage_phase_deg"):
+                if f"{sid}.{key}" in values:
+                    row[f"{sid}.{key}"] = values[f"{sid}.{key}"]
+        row["assemblable"] = bool(ok)
+        rows[name] = row
+    return pd.DataFrame(rows).T
 
 
 def optimize_dataset(result: OptimizeResult, attrs: dict | None = None):
@@ -1336,3 +1513,197 @@ def optimize_dataset(result: OptimizeResult, attrs: dict | None = None):
     }
     out.update(attrs or {})
     return xr.Dataset(data, coords=coords, attrs={k: _attr(v) for k, v in out.items()})
+
+
+# ------------------------------------------------------------------------- re-check
+
+
+@dataclasses.dataclass(frozen=True)
+class Recheck:
+    """An independent re-check of a phasing optimisation (:func:`recheck`).
+
+    **Fields:** ``band_hz``: the band swept; ``sweeps``: ``{"baseline", "optimum"}`` ->
+    :class:`~gearjax.SweepResult`, fresh sweeps with backlash (the sweep's own
+    frequency-dependent harmonics, no point budget of the optimiser); ``orbits``: the same
+    keys -> results Dataset of the time integration started from the sweep's peak orbit
+    (one point); ``verify``: the same keys -> :class:`~gearjax.VerifyResult` at
+    ``verify_hz`` (harmonic balance solved afresh at each point, then integrated);
+    ``peaks``: ``pandas.DataFrame``, one row per design: the optimiser's peaks (linear,
+    with backlash), the fresh sweep's peak over its stable points (N), where and on which
+    mesh, the integration's RMS of that mesh from that orbit and their difference, the
+    sweep's points, unstable points, restarts and stop; ``points``: ``pandas.DataFrame``,
+    one row per design and ``verify_hz`` frequency: the largest RMS mesh force by
+    harmonic balance and by integration (N), the largest stage-relative difference, the
+    integration result, whether every mesh is within the tolerance; ``seconds``.
+    """
+
+    band_hz: tuple[float, float]
+    verify_hz: tuple[float, ...]
+    sweeps: dict
+    orbits: dict
+    verify: dict
+    peaks: object
+    points: object
+    seconds: float
+
+
+def band_peak(ds, max_dlf: float = MAX_DLF) -> tuple[float, float, str, int]:
+    """``(peak RMS (N), reference-stage Hz, mesh, point index)`` of a sweep Dataset over
+    its converged, stable points whose load factors are at most ``max_dlf`` (as
+    :class:`NonlinearBand`); ``(nan, nan, "", -1)`` when there is none."""
+    ok = np.asarray(ds["converged"].values, bool) & (np.asarray(ds["stable"].values) == 1)
+    dlf = np.asarray(ds["dlf"].values, float)
+    ok &= np.nanmax(np.where(np.isfinite(dlf), dlf, 0.0), axis=1) <= max_dlf
+    rms = np.where(ok[:, None], np.asarray(ds["rms_force"].values, float), -np.inf)
+    if not np.any(np.isfinite(rms)):
+        return math.nan, math.nan, "", -1
+    i, j = np.unravel_index(int(np.argmax(rms)), rms.shape)
+    return (float(rms[i, j]), float(ds["mesh_frequency_hz"].values[i]),
+            str(ds["mesh"].values[j]), int(i))
+
+
+def point_state(ds, i: int):
+    """``(x0, v0)`` ``(n,)``: the state at ``t = 0`` of point ``i`` of a sweep Dataset
+    (its ``displacement_cos`` / ``displacement_sin`` harmonics), to start an integration
+    on that orbit (:func:`~gearjax.hb_initial_state`)."""
+    from ._time_domain import hb_initial_state
+
+    K = int(ds["harmonics"].values[i])
+    cos = np.asarray(ds["displacement_cos"].values[i], float)  # (n, H + 1)
+    sin = np.asarray(ds["displacement_sin"].values[i], float)
+    X = np.zeros((2 * K + 1, cos.shape[0]))
+    X[0] = cos[:, 0]
+    X[1::2] = cos[:, 1:K + 1].T
+    X[2::2] = sin[:, 1:K + 1].T
+    eta = json_solver(ds).get("eta", 1)
+    return hb_initial_state(jnp.asarray(X), float(ds["omega"].values[i]), int(eta))
+
+
+def json_solver(ds) -> dict:
+    import json
+
+    try:
+        return json.loads(ds.attrs.get("solver", "{}"))
+    except ValueError:
+        return {}
+
+
+def _recheck_designs(result) -> tuple[str, str, tuple, dict]:
+    """``(gear, reference stage, band, {name: (train, linear peak, backlash peak)})`` of an
+    :class:`OptimizeResult` or of its Dataset."""
+    if isinstance(result, OptimizeResult):
+        return result.gear, result.reference_stage, result.band_hz, {
+            "baseline": (result.baseline_train, result.baseline.linear_peak,
+                         result.baseline.nonlinear_peak),
+            "optimum": (result.train, result.optimum.linear_peak,
+                        result.optimum.nonlinear_peak)}
+    import json
+
+    from ._toml_io import loads_train
+
+    attrs = getattr(result, "attrs", {})
+    if attrs.get("kind") != "optimize":
+        raise ValueError("recheck needs an OptimizeResult or its Dataset (kind 'optimize'), "
+                         f"not {type(result).__name__} of kind {attrs.get('kind')!r}")
+    band = attrs["band_hz"]
+    band = json.loads(band) if isinstance(band, str) else list(band)
+    peak = lambda key: float(attrs.get(key, math.nan))  # noqa: E731
+    return str(attrs["gear"]), str(attrs["reference_stage"]), tuple(band), {
+        "baseline": (loads_train(attrs["baseline_train_toml"]), peak("baseline_peak_linear"),
+                     peak("baseline_peak_nonlinear")),
+        "optimum": (loads_train(attrs["train_toml"]), peak("optimum_peak_linear"),
+                    peak("optimum_peak_nonlinear"))}
+
+
+def recheck(
+    result,
+    band_hz: tuple[float, float] | None = None,
+    *,
+    verify_hz: Sequence[float] | None = None,
+    harmonics: int | None = None,
+    max_step_hz: float | None = None,
+    max_points: int = 3000,
+    progress: Callable[[str], None] | None = None,
+) -> Recheck:
+    """Re-check the baseline and the optimum of ``result`` independently of the optimiser.
+
+    ``result``: an :class:`OptimizeResult`, or the Dataset of a saved one
+    (:func:`optimize_dataset`, ``gearjax optimize --out``; ``gj.load_results``).
+
+    For each design: (1) a fresh sweep with backlash over ``band_hz`` (default the
+    optimisation's band; a part of it around the peaks is cheaper) by
+    :func:`gearjax.sweep` with its own frequency-dependent harmonics (``harmonics``: a
+    fixed K instead), ``max_step_hz`` and ``max_points``; its peak over stable points
+    (:func:`band_peak`); (2) time integration (diffrax) started from the sweep's peak
+    orbit: a stable orbit is what the integration settles on, with the same RMS; (3)
+    :func:`gearjax.verify_gear` at ``verify_hz`` (default: the fresh peak frequencies of
+    both designs), the harmonic balance solved afresh there and integrated.
+
+    **Returns:** :class:`Recheck` (tables ``peaks`` and ``points``). **Raises:**
+    ``TrainError`` for a bad band or frequencies, as :func:`gearjax.sweep`.
+    """
+    import pandas as pd
+
+    from ._simulate import simulate_gear
+    from ._sweep import sweep
+    from ._verify import verify_gear
+
+    t0 = time.perf_counter()
+    say = progress or (lambda message: None)
+    gear, ref, band, designs = _recheck_designs(result)
+    lo, hi = _check_band(band if band_hz is None else band_hz)
+    sweeps, orbits, peak_rows, peak_at = {}, {}, [], {}
+    for name, (train, linear_peak, nonlinear_peak) in designs.items():
+        say(f"recheck: {name}, sweep with backlash {lo:g}-{hi:g} Hz")
+        sw = sweep(train, gear, lo, hi, stage=ref,
+                   harmonics=harmonics, max_step_hz=max_step_hz, max_points=max_points)
+        sweeps[name] = sw
+        ds = sw.dataset
+        peak, f_peak, mesh, i = band_peak(ds)
+        row = {"design": name, "optimiser linear peak (N)": linear_peak,
+               "optimiser backlash peak (N)": nonlinear_peak,
+               "sweep peak (N)": peak, "at (Hz)": f_peak, "mesh": mesh}
+        if i >= 0:
+            peak_at[name] = f_peak
+            say(f"recheck: {name}, {ds.sizes['point']} points in {sw.seconds:.0f} s, peak "
+                f"{peak:.1f} N at {f_peak:.1f} Hz ({mesh}); integrating from that orbit")
+            x0, v0 = point_state(ds, i)
+            ni = simulate_gear(train, gear, [f_peak], stage=ref, x0=x0, v0=v0)
+            orbits[name] = ni
+            j = list(ds["mesh"].values).index(mesh)
+            rms_ni = float(ni["rms_force"].values[0, j])
+            row.update({"integrated (N)": rms_ni, "rel diff": abs(rms_ni - peak) / peak,
+                        "integration": str(ni["result"].values[0])})
+        else:
+            row.update({"integrated (N)": math.nan, "rel diff": math.nan,
+                        "integration": "no stable point"})
+        stable = np.asarray(ds["stable"].values)
+        row.update({"points": int(ds.sizes["point"]), "unstable": int(np.sum(stable == 0)),
+                    "restarts": len(sw.restarts), "stop": sw.stop,
+                    "sweep seconds": sw.seconds})
+        peak_rows.append(row)
+    if verify_hz is None:
+        verify_hz = sorted(set(round(f, 3) for f in peak_at.values()))
+    verify_hz = tuple(float(f) for f in verify_hz)
+    checks, point_rows = {}, []
+    if verify_hz:
+        for name, (train, *_) in designs.items():
+            say(f"recheck: {name}, harmonic balance and time integration at "
+                f"{', '.join(f'{f:g}' for f in verify_hz)} Hz")
+            v = verify_gear(train, gear, list(verify_hz), stage=ref, harmonics=harmonics)
+            checks[name] = v
+            for k, f in enumerate(verify_hz):
+                hb_row, ni_row = v.rms_hb[k], v.rms_ni[k]
+                j = int(np.nanargmax(hb_row)) if np.any(np.isfinite(hb_row)) else 0
+                point_rows.append({
+                    "design": name, "Hz": f, "mesh": str(v.hb["mesh"].values[j]),
+                    "harmonic balance (N)": float(hb_row[j]),
+                    "integration (N)": float(ni_row[j]),
+                    "max rel diff": float(np.nanmax(v.rel_diff[k]))
+                    if np.any(np.isfinite(v.rel_diff[k])) else math.nan,
+                    "hb stable": bool(v.hb["stable"].values[k] == 1),
+                    "integration": str(v.ni["result"].values[k]),
+                    "all meshes ok": bool(np.all(v.ok[k]))})
+    return Recheck(band_hz=(lo, hi), verify_hz=verify_hz, sweeps=sweeps, orbits=orbits,
+                   verify=checks, peaks=pd.DataFrame(peak_rows).set_index("design"),
+                   points=pd.DataFrame(point_rows), seconds=time.perf_counter() - t0)

@@ -192,6 +192,32 @@ def test_paper_stage_sets_and_rules(paper):
     assert not O.planet_set_ok(st, [0, 90, 181, 270])  # off a slot
     assert not O.planet_set_ok(st, [0, 61.2, 180, 270])  # 17 slots: overlap
     assert 1120 <= len(O.admissible_planet_sets(st, modulo_rotation=True)) <= 1130
+    # Z_s psi mod 360 takes 10 values on 100 slots: 220 distinct designs, 73 up to rotation
+    reps, sizes = O.phasing_classes(st, sets)
+    assert len(reps) == 220 and sizes.sum() == 4495
+    assert [0, 90, 180, 270] in sets[reps].tolist()  # the balanced member represents
+    assert len(O.phasing_classes(st, sets, modulo_shift=True)[0]) == 73
+    assert O.planet_imbalance([0, 90, 180, 270]) == pytest.approx(0, abs=1e-15)
+
+
+def test_sets_of_one_phasing_class_are_the_same_design(paper):
+    # stage 2: 124 slots, Z_s = 44: the residues 44 k mod 124 repeat every 31 slots, so
+    # planets on slots (20, 55, 89) and (27, 51, 86) = (89 - 62, 20 + 31, 55 + 31) have the
+    # same mesh phases, relabelled
+    S = 124
+    a = 360 * np.array([0, 20, 55, 89]) / S
+    b = 360 * np.array([0, 27, 51, 86]) / S
+    c = 360 * np.array([0, 21, 55, 89]) / S  # another class
+    st = paper.stage("2")
+    assert all(O.planet_set_ok(st, x) for x in (a, b, c))
+    reps, sizes = O.phasing_classes(st, np.array([a, b, c]))
+    assert sorted(sizes.tolist()) == [1, 2]
+    paths = ("2.planet_angles_deg.2", "2.planet_angles_deg.3", "2.planet_angles_deg.4")
+    r = D.design_sweep(paper, "first", paths, np.array([a[1:], b[1:], c[1:]]), FREQS[:2],
+                       harmonics=K)
+    np.testing.assert_allclose(np.sort(r.rms_force[0], axis=-1),
+                               np.sort(r.rms_force[1], axis=-1), rtol=1e-9)
+    assert not np.allclose(r.rms_force[0], r.rms_force[2], rtol=1e-3)
 
 
 def test_rotated_set_is_the_same_design_with_another_stage_phase(paper):
@@ -234,6 +260,23 @@ def test_proxy_screen_matches_first_order_forces(paper):
             rms = np.asarray(O.first_order_rms(O.first_order(system, w), system))
             top = np.sort(rms.max(axis=1))[::-1][:3]
             np.testing.assert_allclose(prof[i, j], top, rtol=1e-10)
+    # stage 2 with its stage phase screened as well
+    sets2 = np.array([[0, 90, 180, 270], [0, 58.064516129032256, 159.67741935483872,
+                                           258.38709677419354]])
+    phases = np.array([0.0, 100.0])
+    prof = O.proxy_screen(paper, "first", "2", sets2, gammas, w, every, chunk=2, depth=3,
+                          stage_phases_deg=phases)
+    assert prof.shape == (2, 2, 2, 3)
+    for i, s in enumerate(sets2):
+        for j, g in enumerate(gammas):
+            for k, ph in enumerate(phases):
+                t = O.train_at(paper, ("2.planet_angles_deg.2", "2.planet_angles_deg.3",
+                                       "2.planet_angles_deg.4", "2.sun_ring_phase_deg",
+                                       "2.stage_phase_deg"), [*s[1:], g, ph])
+                system = gj.assemble(t, "first")
+                rms = np.asarray(O.first_order_rms(O.first_order(system, w), system))
+                top = np.sort(rms.max(axis=1))[::-1][:3]
+                np.testing.assert_allclose(prof[i, j, k], top, rtol=1e-10)
 
 
 def test_optimiser_improves_and_returns_an_admissible_design(small):
@@ -269,6 +312,33 @@ def test_nonlinear_tier_never_makes_the_peak_with_backlash_worse(small):
     ds = O.optimize_dataset(result)
     assert ds["optimum_nonlinear_rms"].dims == ("optimum_point", "mesh")
     assert ds.attrs["baseline_peak_nonlinear"] == pytest.approx(b.peak)
+
+
+def test_recheck_sweeps_and_integrates_baseline_and_optimum(small):
+    train = gj.load_train(small)
+    result = O.optimize(train, "low", (2000.0, 9000.0), settings=TINY_SETTINGS)
+    frame = O.optimize_frame(result)
+    assert list(frame.index) == ["baseline", "optimum", "relaxed"]
+    assert frame.loc["optimum", "assemblable"] and not frame.loc["relaxed", "assemblable"]
+    assert frame.loc["optimum", "linear peak (N)"] == pytest.approx(result.optimum.linear_peak)
+    # from the result and from its saved Dataset: the same designs
+    assert O._recheck_designs(O.optimize_dataset(result))[3]["optimum"][0].stage(
+        "a").planet_angles_deg.tolist() == pytest.approx(
+        result.train.stage("a").planet_angles_deg.tolist())
+    rc = O.recheck(result, (3000.0, 3600.0), verify_hz=[3300.0], harmonics=4,
+                   max_step_hz=50.0, max_points=200)
+    assert set(rc.sweeps) == set(rc.verify) == {"baseline", "optimum"}
+    assert list(rc.peaks.index) == ["baseline", "optimum"]
+    for name, row in rc.peaks.iterrows():
+        ds = rc.sweeps[name].dataset
+        stable = (ds["stable"].values == 1) & ds["converged"].values
+        assert row["sweep peak (N)"] == pytest.approx(np.nanmax(ds["rms_force"].values[stable]))
+        assert 3000.0 <= row["at (Hz)"] <= 3600.0
+        # the integration started on the stable peak orbit stays on it
+        assert row["integration"] == "converged" and row["rel diff"] < 0.02
+    assert len(rc.points) == 2 and rc.points["all meshes ok"].all()
+    with pytest.raises(ValueError, match="OptimizeResult"):
+        O.recheck(rc.sweeps["optimum"].dataset)
 
 
 def test_cli_optimize_writes_a_train_every_command_loads(capsys, small, tmp_path):
