@@ -86,19 +86,27 @@ def report(name, result) -> None:
         print(f"stability change near {b['mesh_frequency_hz']:.1f} Hz: {b['kind']}")
     stable = ds["stable"].values
     print(f"unstable points: {int(np.sum(stable == 0))} of {P}")
-    rms, f = ds["rms_force"].values, ds["mesh_frequency_hz"].values
+    table(ds)
+
+
+def table(ds) -> None:
+    """Per stage and side, over the points that are not unstable (what a rig can see):
+    the peak RMS mesh force and where, the largest separation and back-contact shares,
+    and the mean-force check (sum over planets of the mean force / static force - 1)."""
+    keep = ds["stable"].values != 0
+    rms, f = ds["rms_force"].values[keep], ds["mesh_frequency_hz"].values[keep]
     print(f"{'stage':>6} {'side':>5} {'peak RMS N':>11} {'at Hz':>9} {'max sep':>8} "
-          f"{'max back':>9} {'mean/static-1':>14}")
+          f"{'max back':>9} {'mean/static-1':>14}   ({int(keep.sum())} stable points)")
     for stage in dict.fromkeys(ds["stage"].values.tolist()):
         for side in ("sun", "ring"):
             cols = (ds["stage"].values == stage) & (ds["side"].values == side)
             i = int(np.nanargmax(np.nanmax(rms[:, cols], axis=1)))
-            mean = ds["mean_force"].values[:, cols].sum(axis=1)
+            mean = ds["mean_force"].values[keep][:, cols].sum(axis=1)
             static = ds["static_force"].values[cols].sum()
             err = np.nanmax(np.abs(mean / static - 1))
             print(f"{stage:>6} {side:>5} {np.nanmax(rms[:, cols]):>11.1f} {f[i]:>9.1f} "
-                  f"{np.nanmax(ds['separation'].values[:, cols]):>8.3f} "
-                  f"{np.nanmax(ds['back_contact'].values[:, cols]):>9.3f} {err:>14.2e}")
+                  f"{np.nanmax(ds['separation'].values[keep][:, cols]):>8.3f} "
+                  f"{np.nanmax(ds['back_contact'].values[keep][:, cols]):>9.3f} {err:>14.2e}")
 
 
 def main() -> None:

@@ -16,7 +16,14 @@ Layout (interface.md, Results files):
 - per mesh, optionally: ``static_force`` (N);
 - per point and mesh: the :class:`~gearjax._responses.MeshResponses` fields
   ``mean_force``, ``rms_force``, ``max_force`` (N), ``dlf``, ``separation``,
-  ``back_contact`` (1), ``mean_torque`` (N m).
+  ``back_contact`` (1), ``mean_torque`` (N m);
+- harmonic-balance sweeps also hold the member displacements
+  (:func:`add_displacement_harmonics`): coordinates ``dof`` (member names, e.g.
+  ``"1.sun"``) and ``harmonic`` (0..H), ``harmonics`` per point (its K; the segments of
+  a sweep differ) and ``displacement_cos`` / ``displacement_sin`` (``point, dof,
+  harmonic``; rad, or m for translations; zero above the point's K): ``x(t) = cos_0 +
+  sum_k cos_k cos(k Omega t / eta) + sin_k sin(k Omega t / eta)``. They are left out of
+  CSV.
 
 Every variable has a ``units`` attribute. Global attributes: ``train_toml`` (the
 train file text), ``gear``, ``solver`` (settings as a JSON string),
