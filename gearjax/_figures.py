@@ -15,6 +15,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ._campbell import Campbell
+from ._plot import _clip_to_stable
 
 WHAT = {"rms": ("rms_force", "RMS mesh force (N)"), "dlf": ("dlf", "dynamic load factor"),
         "separation": ("separation", "share of period in separation"),
@@ -126,6 +127,7 @@ def response_figure(sweep=None, reference=None, points=None, what: str = "rms",
     first = next(ds for ds in (sweep, reference, points) if ds is not None)
     stages = list(dict.fromkeys(np.asarray(first["stage"]).tolist()))
     fig, axes = _figure(10.0, 3.0 * len(stages), len(stages), 1, sharex=True)
+    shown = [[] for _ in stages]  # per panel: (f kHz, value, not unstable) of every point
     for r, stage in enumerate(stages):
         ax = axes[r, 0]
         for role, ds in (("reference", reference), ("sweep", sweep), ("points", points)):
@@ -138,6 +140,9 @@ def response_figure(sweep=None, reference=None, points=None, what: str = "rms",
                 color = SIDE_COLORS.get(side, "k")
                 first_of_side = j == next(k for k in sel if str(ds["side"].values[k]) == side)
                 y = np.asarray(ds[var])[:, j]
+                not_unstable = (np.asarray(ds["stable"]) != 0 if role == "sweep"
+                                and "stable" in ds else np.ones(f.shape, bool))
+                shown[r].append((f, y, not_unstable))
                 tag = f"{side}, " if first_of_side else None
                 if role == "reference":
                     order = np.argsort(f)
@@ -175,8 +180,14 @@ def response_figure(sweep=None, reference=None, points=None, what: str = "rms",
         if xlim[0] == xlim[1]:
             xlim = (xlim[0] - 0.1, xlim[1] + 0.1)
     axes[0, 0].set_xlim(*xlim)
-    for ax in axes[:, 0]:
+    for ax, data in zip(axes[:, 0], shown):
         _fit_y(ax, xlim)
+        if data:  # unstable branches far above the rest (parametric instability): off scale
+            f = np.concatenate([d[0] for d in data])
+            y = np.concatenate([d[1] for d in data])
+            ok = np.concatenate([d[2] for d in data])
+            inside = (f >= xlim[0]) & (f <= xlim[1])
+            _clip_to_stable(ax, y[inside], y[inside & ok])
     if title:
         fig.suptitle(title, fontsize=10)
     return fig
