@@ -1566,15 +1566,10 @@ def point_state(ds, i: int):
     """``(x0, v0)`` ``(n,)``: the state at ``t = 0`` of point ``i`` of a sweep Dataset
     (its ``displacement_cos`` / ``displacement_sin`` harmonics), to start an integration
     on that orbit (:func:`~gearjax.hb_initial_state`)."""
+    from ._results import displacement_coefficients
     from ._time_domain import hb_initial_state
 
-    K = int(ds["harmonics"].values[i])
-    cos = np.asarray(ds["displacement_cos"].values[i], float)  # (n, H + 1)
-    sin = np.asarray(ds["displacement_sin"].values[i], float)
-    X = np.zeros((2 * K + 1, cos.shape[0]))
-    X[0] = cos[:, 0]
-    X[1::2] = cos[:, 1:K + 1].T
-    X[2::2] = sin[:, 1:K + 1].T
+    X = displacement_coefficients(ds, i)
     eta = json_solver(ds).get("eta", 1)
     return hb_initial_state(jnp.asarray(X), float(ds["omega"].values[i]), int(eta))
 

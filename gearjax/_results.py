@@ -245,6 +245,20 @@ def add_displacement_harmonics(ds: xr.Dataset, X, dof_labels: Sequence[str],
     return ds
 
 
+def displacement_coefficients(ds: xr.Dataset, i: int) -> np.ndarray:
+    """The real Fourier coefficients ``(2K_i+1, n)`` (:mod:`gearjax._aft` layout) of point
+    ``i``'s member displacements, from the Dataset variables that
+    :func:`add_displacement_harmonics` wrote: the inverse of that layout."""
+    K = int(ds["harmonics"].values[i])
+    cos = np.asarray(ds["displacement_cos"].values[i], dtype=float)  # (n, H + 1)
+    sin = np.asarray(ds["displacement_sin"].values[i], dtype=float)
+    X = np.zeros((2 * K + 1, cos.shape[0]))
+    X[0] = cos[:, 0]
+    X[1::2] = cos[:, 1:K + 1].T
+    X[2::2] = sin[:, 1:K + 1].T
+    return X
+
+
 def save_results(ds: xr.Dataset, path) -> pathlib.Path:
     """Write ``ds`` to ``path``: NetCDF (h5netcdf engine) for ``.nc``, CSV (one row per
     point and mesh) for ``.csv``; any other suffix is refused with a ``ValueError``.

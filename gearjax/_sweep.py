@@ -311,8 +311,9 @@ def sweep(
         rows[-1]["branch"] = np.full(len(pts), branch)
     if not rows:
         raise RuntimeError(f"sweep produced no point: {stop}")
-    data = {k: (sum((r[k] for r in rows), []) if k == "X" else np.concatenate([r[k] for r in rows]))
-            for k in rows[0] if k != "responses"}
+    data = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]
+            if k not in ("responses", "X")}
+    data["X"] = [X for r in rows for X in r["X"]]  # K differs between segments
     data["responses"] = jax.tree.map(lambda *a: np.concatenate(a),
                                      *[r["responses"] for r in rows])
     omegas = data["omega"]

@@ -93,7 +93,8 @@ def test_harmonics_rule_doubling_changes_rms_by_less_than_half_a_percent(paper, 
 
 def test_harmonics_rule_with_tooth_separation(paper):
     # 4000 Hz with the 0.05 mm backlash: the stage-1 ring meshes separate for about 15%
-    # of the period; the rule's K = 48 is within 0.1% of K = 96 (K = 32: 2.8% off)
+    # of the period; the rule's K = 48 is 0.10% off K = 128 (K = 32: 2.8% off), and
+    # doubling it must change the RMS forces by less than 0.5%
     K = _sweep.harmonics_rule(4000.0 / 7, _hb.highest_excitation(paper))
     assert K == 48
     _, rms, sep = rms_at(paper, 4000.0, K)

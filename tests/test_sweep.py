@@ -87,6 +87,7 @@ def test_linear_sweep_json_and_files(capsys, tmp_path):
     assert list(ds["dof"].values[:3]) == list(system.dof_labels[:3]) and np.all(s[:, 0] == 0)
     X = np.zeros((33, system.n_dof))
     X[0], X[1::2], X[2::2] = c[:, 0], c[:, 1:].T, s[:, 1:].T
+    np.testing.assert_array_equal(gj._results.displacement_coefficients(ds, 1), X)
     resp = gj.mesh_responses(problem, jnp.asarray(X), float(ds["omega"].values[1]),
                              gj.static_mesh_forces(system))
     np.testing.assert_allclose(resp.rms_force, ds["rms_force"].values[1], rtol=1e-10)
