@@ -99,8 +99,9 @@ def _clip_to_stable(ax, values, stable_values, factor: float = 1.5) -> None:
         return
     low = min(0.0, float(np.nanmin(values)))
     ax.set_ylim(low, factor * top)
-    ax.text(0.99, 0.97, f"unstable branches up to {high:.3g}, off scale", fontsize=7,
-            ha="right", va="top", transform=ax.transAxes, color="0.3")
+    # upper left: the legends of the sweep and paper figures sit on the right
+    ax.text(0.01, 0.97, f"unstable branches up to {high:.3g}, off scale", fontsize=7,
+            ha="left", va="top", transform=ax.transAxes, color="0.3")
 
 
 def _mesh_panels(ds, ylabel: str):
