@@ -187,7 +187,7 @@ def response_figure(sweep=None, reference=None, points=None, what: str = "rms",
             y = np.concatenate([d[1] for d in data])
             ok = np.concatenate([d[2] for d in data])
             inside = (f >= xlim[0]) & (f <= xlim[1])
-            _clip_to_stable(ax, y[inside], y[inside & ok])
+            _clip_to_stable(ax, y[inside], y[inside & ok], corner="left")  # legend: right
     if title:
         fig.suptitle(title, fontsize=10)
     return fig

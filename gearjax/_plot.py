@@ -88,20 +88,22 @@ def plot_sweep(ds, path: str, what: str = "rms", title: str = ""):
     _finish(fig, axes, ds, path, title or "frequency response (solid stable, dashed unstable)")
 
 
-def _clip_to_stable(ax, values, stable_values, factor: float = 1.5) -> None:
+def _clip_to_stable(ax, values, stable_values, factor: float = 1.5, corner: str = "right"
+                    ) -> None:
     """Keep the stable response readable: where unstable branches reach more than
     ``factor`` times the largest stable value (inside a parametric instability the
     periodic orbits of the paper case reach meganewtons, all unstable), the y-axis stops
-    at ``factor`` times it and a note gives how far the unstable branches go."""
+    at ``factor`` times it and a note in the upper ``corner`` (``"left"`` or ``"right"``,
+    the one without a legend) gives how far the unstable branches go."""
     top = np.nanmax(stable_values) if np.any(np.isfinite(stable_values)) else np.nan
     high = np.nanmax(values) if np.any(np.isfinite(values)) else np.nan
     if not (np.isfinite(top) and top > 0 and high > factor * top):
         return
     low = min(0.0, float(np.nanmin(values)))
     ax.set_ylim(low, factor * top)
-    # upper left: the legends of the sweep and paper figures sit on the right
-    ax.text(0.01, 0.97, f"unstable branches up to {high:.3g}, off scale", fontsize=7,
-            ha="left", va="top", transform=ax.transAxes, color="0.3")
+    x = 0.01 if corner == "left" else 0.99
+    ax.text(x, 0.97, f"unstable branches up to {high:.3g}, off scale", fontsize=7,
+            ha=corner, va="top", transform=ax.transAxes, color="0.3")
 
 
 def _mesh_panels(ds, ylabel: str):
