@@ -978,8 +978,7 @@ def optimize(
         say(f"optimize: continuous relaxation (L-BFGS on the linear model at {f_relax.size} "
             "frequencies: the resonances and the optimum's screen grid)")
         t0 = time.perf_counter()
-        relaxation, relaxed_theta = relax(current, variables, paths, screen, f_relax, settings,
-                                          model="linear")
+        relaxation, relaxed_theta = relax(current, variables, paths, screen, f_relax, settings)
         say(f"optimize: relaxation: {relaxation.iterations} iterations in "
             f"{time.perf_counter() - t0:.1f} s ({relaxation.message})")
     # the common grid of the reported linear peaks
@@ -1260,7 +1259,7 @@ def resonance_frequencies(system, orders, mu_ref: int, lo: float, hi: float) -> 
 
 
 def relax(train: Train, variables, paths, screen: _Screen, freqs_hz,
-          settings: OptimizeSettings, model: str = "proxy") -> tuple[Relaxation, np.ndarray]:
+          settings: OptimizeSettings) -> tuple[Relaxation, np.ndarray]:
     """Minimise the smooth peak of the linear model at ``freqs_hz`` over continuous planet
     angles (gaps kept above the overlap limit) and phases, from ``train``'s values, by
     L-BFGS with gradients from ``jax.grad`` (module docstring). **Returns:**
@@ -1278,13 +1277,8 @@ def relax(train: Train, variables, paths, screen: _Screen, freqs_hz,
     family, hb_settings = screen.family, screen.settings
     omegas = jnp.asarray(screen.to_omega(np.asarray(freqs_hz, dtype=float)))
 
-    if model == "proxy":
-        def rms_of(z):
-            return first_order_rms(screen.fo, family(mapping(z)))
-    else:
-        def rms_of(z):
-            return batched_rms(family, mapping(z)[None], omegas, hb_settings,
-                               solver="linear")[0]
+    def rms_of(z):
+        return batched_rms(family, mapping(z)[None], omegas, hb_settings, solver="linear")[0]
 
     hard = jax.jit(lambda z: jnp.max(rms_of(z)))
     peak0 = float(hard(jnp.asarray(z0)))

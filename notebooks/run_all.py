@@ -6,7 +6,8 @@
 
 ``GEARJAX_NOTEBOOK_QUICK=1`` (read by each notebook's first code cell) lowers harmonics,
 points and bands so that every notebook runs in about a minute on 2 cores; the committed
-notebooks are executed without it (settings in each notebook's first cells). Exits 1 when a cell raises (the error is printed), 2 on bad arguments.
+notebooks are executed without it (settings in each notebook's first cells). Exits 1
+when a cell raises (the error is printed), 2 on bad arguments.
 """
 
 from __future__ import annotations
