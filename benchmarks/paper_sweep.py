@@ -1,8 +1,9 @@
 """The paper's first gear (bundled example): linear and 0.05 mm backlash frequency sweeps.
 
 Runs ``gearjax.sweep`` over a band of stage-1 mesh frequency (default the paper's
-2-15 kHz, Figs 4-6) and prints, per sweep: points, wall time (first segment's compile
-included) and time per point, harmonics per segment, the folds and stability changes
+2-15 kHz, Figs 4-6) and prints, per sweep: points, wall time, the part of it spent
+compiling (JAX's compile-duration events: tracing, lowering, XLA) and the time per
+point after compile, harmonics per segment, the folds and stability changes
 located, the largest RMS mesh force of each stage and where, the largest separation
 and back-contact shares, and the mean-force check (per stage and side, the sum over
 planets of the mean mesh force against the static one: equilibrium of the mean fixes
@@ -74,11 +75,27 @@ def breakdown(train, result) -> None:
               f"{1e3 * _best_of(stab, problem, X, omega, repeat=2):>10.2f}")
 
 
-def report(name, result) -> None:
+_COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration",
+                   "/jax/core/compile/jaxpr_to_mlir_module_duration",
+                   "/jax/core/compile/backend_compile_duration")
+_compile_seconds = [0.0]
+
+
+def _on_event(name, seconds, **_):
+    if name in _COMPILE_EVENTS:
+        _compile_seconds[0] += seconds
+
+
+jax.monitoring.register_event_duration_secs_listener(_on_event)
+
+
+def report(name, result, compile_s) -> None:
     ds = result.dataset
     P = ds.sizes["point"]
-    print(f"\n== {name}: {P} points, {result.seconds:.1f} s ({1e3 * result.seconds / P:.0f} ms "
-          f"per point), stop: {result.stop}")
+    run = result.seconds - compile_s
+    print(f"\n== {name}: {P} points, {result.seconds:.1f} s of which compilation (tracing, "
+          f"lowering, XLA) {compile_s:.1f} s; after compile {run:.1f} s, "
+          f"{1e3 * run / P:.0f} ms per point; stop: {result.stop}")
     print("segments: " + ", ".join(f"{a:.0f}-{b:.0f} Hz K={k}" for a, b, k in result.segments))
     if result.folds_hz:
         print("folds (Hz): " + ", ".join(f"{f:.1f}" for f in result.folds_hz))
@@ -125,9 +142,10 @@ def main() -> None:
         train = gj.load_train()
     runs = [("linear", True)] + ([] if args.linear_only else [("backlash", False)])
     for name, linear in runs:
+        compiled = _compile_seconds[0]
         result = sweep(train, "first", args.f_from, args.f_to, linear=linear, points=args.points,
                        max_points=args.max_points, progress=progress_printer(sys.stderr))
-        report(name, result)
+        report(name, result, _compile_seconds[0] - compiled)
         breakdown(train, result)
         gj.save_results(result.dataset, out / f"paper_{name}.nc")
         plot_sweep(result.dataset, out / f"paper_{name}.png",

@@ -131,8 +131,9 @@ class ArcState(eqx.Module):
 
 
 class _Corrector(eqx.Module):
-    """Corrector loop state: iterate, total and per-mode iteration counts, mode (chord or
-    full Newton), outcome and the previous step size (chord contraction check)."""
+    """Corrector loop state: iterate, total and per-phase iteration counts, ``full`` (the
+    chord stalled: go on in full Newton), outcome and the previous step size (chord
+    contraction check)."""
 
     y: Array
     lam: Array
@@ -188,21 +189,19 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
     at every iterate, before the step is given up. On success the state moves to the
     new point with a grown or kept step; on failure it stays and the step halves (the
     caller stops below ``min_step``).
+
+    The two phases are separate loops, so the chord loop reads the factors in place
+    (no copy of the ``(N+1)^2`` matrix per iteration). The returned ``lu``, ``piv`` are
+    those of the new point whenever the corrector converged, also for an attempt that
+    is not accepted (a fold crossed with a long step): :func:`keep_factors` puts the
+    state's back there (a select over the factors is itself a pass over ``(N+1)^2``
+    numbers, which the Python driver does without).
     """
     h = jnp.minimum(state.h, settings.max_dlambda / jnp.maximum(jnp.abs(state.tlam), 1e-12))
     y_p = state.y + h * state.ty
     lam_p = state.lam + h * state.tlam
 
-    def bordered_lu(y, lam):
-        return jax.scipy.linalg.lu_factor(_bordered(param, y, lam, state.ty, state.tlam))
-
-    def cond(c):
-        return (c.k < 2 * settings.max_corrector) & ~c.done
-
-    def body(c):
-        # full Newton (after the chord failed): the bordered Jacobian at the iterate
-        lu, piv = jax.lax.cond(c.full, lambda: bordered_lu(c.y, c.lam),
-                               lambda: (state.lu, state.piv))
+    def iterate(c, lu, piv, full):
         r = param.residual(c.y, c.lam)
         arc = state.ty @ (c.y - y_p) + state.tlam * (c.lam - lam_p)
         d = jax.scipy.linalg.lu_solve((lu, piv), -jnp.concatenate([r, arc[None]]))
@@ -210,22 +209,36 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
         finite = jnp.all(jnp.isfinite(d))
         small = size <= settings.rtol * jnp.maximum(1.0, jnp.max(jnp.abs(c.y)))
         ok = finite & small & (jnp.max(jnp.abs(r)) <= jnp.sqrt(settings.rtol))
-        # chord iterations must contract; when they do not (the Jacobian changed, e.g. a
-        # contact sample crossed the clearance), restart from the predictor in full Newton
-        stalled = ~c.full & (((c.i > 1) & (size > c.prev)) | (c.i + 1 >= settings.max_corrector))
-        failed = ~finite | (c.full & (c.i + 1 >= settings.max_corrector))
+        if full:
+            stalled = jnp.asarray(False)
+            failed = ~finite | (c.i + 1 >= settings.max_corrector)
+        else:
+            # chord iterations must contract; when they do not (the Jacobian changed, e.g. a
+            # contact sample crossed the clearance), restart from the predictor in full Newton
+            stalled = ((c.i > 1) & (size > c.prev)) | (c.i + 1 >= settings.max_corrector)
+            failed = ~finite
         restart = stalled & ~ok & ~failed
-        y_new = jnp.where(restart, y_p, jnp.where(finite, c.y + d[:-1], c.y))
-        lam_new = jnp.where(restart, lam_p, jnp.where(finite, c.lam + d[-1], c.lam))
-        return _Corrector(y=y_new, lam=lam_new, k=c.k + 1,
-                          i=jnp.where(restart, 0, c.i + 1), full=c.full | restart,
-                          done=ok | failed, converged=ok,
-                          prev=jnp.where(restart | (c.i == 0), jnp.inf, size))
+        return _Corrector(y=jnp.where(finite & ~restart, c.y + d[:-1], c.y),
+                          lam=jnp.where(finite & ~restart, c.lam + d[-1], c.lam),
+                          k=c.k + 1, i=c.i + 1, full=restart, done=ok | failed | restart,
+                          converged=ok, prev=jnp.where(c.i == 0, jnp.inf, size))
 
+    def chord(c):
+        return iterate(c, state.lu, state.piv, False)
+
+    def newton(c):
+        lu, piv = jax.scipy.linalg.lu_factor(_bordered(param, c.y, c.lam, state.ty, state.tlam))
+        return iterate(c, lu, piv, True)
+
+    not_done = lambda c: ~c.done  # noqa: E731
     init = _Corrector(y=y_p, lam=lam_p, k=jnp.asarray(0), i=jnp.asarray(0),
                       full=jnp.asarray(False), done=jnp.asarray(False),
                       converged=jnp.asarray(False), prev=jnp.asarray(jnp.inf))
-    c = jax.lax.while_loop(cond, body, init)
+    c = jax.lax.while_loop(not_done, chord, init)
+    # the chord stalled: full Newton from the predictor (its flag ``full`` is set)
+    c = jax.lax.cond(c.full, lambda c: jax.lax.while_loop(not_done, newton, _replace(
+        c, y=y_p, lam=lam_p, i=jnp.asarray(0), done=jnp.asarray(False),
+        prev=jnp.asarray(jnp.inf))), lambda c: c, c)
     y, lam, k, converged = c.y, c.lam, c.k, c.converged
 
     def new_tangent(_):
@@ -244,8 +257,8 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
     # d lambda/ds taken linear in s between the two tangents (a, b) over the chord
     # length h: zero at s* = h a / (a - b), where lambda = lam_old + a s* / 2
     a, b = state.tlam, tlam
-    chord = jnp.sqrt(jnp.sum((y - state.y) ** 2) + (lam - state.lam) ** 2)
-    fold_lam = jnp.where(fold, state.lam + chord * a**2 / (2 * jnp.where(fold, a - b, 1.0)),
+    chord_length = jnp.sqrt(jnp.sum((y - state.y) ** 2) + (lam - state.lam) ** 2)
+    fold_lam = jnp.where(fold, state.lam + chord_length * a**2 / (2 * jnp.where(fold, a - b, 1.0)),
                          jnp.nan)
     grow = jnp.where(k <= settings.fast, 1.5, jnp.where(k >= settings.slow, 0.6, 1.0))
     h_next = jnp.where(accepted, jnp.minimum(h * grow, settings.max_step),
@@ -261,9 +274,22 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
         fold=fold,
         fold_lam=fold_lam,
         steps=k,
-        lu=keep(lu, state.lu),
-        piv=keep(piv, state.piv),
+        lu=lu,
+        piv=piv,
     )
+
+
+def keep_factors(old: ArcState, new: ArcState) -> ArcState:
+    """``new`` with ``old``'s factors where the attempt was not accepted (jittable)."""
+    return _replace(new, lu=jnp.where(new.accepted, new.lu, old.lu),
+                             piv=jnp.where(new.accepted, new.piv, old.piv))
+
+
+def _replace(module, **fields):
+    """A copy of the equinox module ``module`` with ``fields`` replaced."""
+    names = tuple(fields)
+    return eqx.tree_at(lambda m: tuple(getattr(m, n) for n in names), module,
+                       tuple(fields[n] for n in names))
 
 
 class Branch(eqx.Module):
@@ -325,7 +351,7 @@ def continue_compiled(param: AbstractParameter, y0, lam0, lam_end, settings: Set
 
     def body(c):
         st, ys, lams, folds, fold_lams, n, _ = c
-        new = arclength_step(param, st, settings)
+        new = keep_factors(st, arclength_step(param, st, settings))
         ys = jnp.where(new.accepted, ys.at[n].set(new.y), ys)
         lams = jnp.where(new.accepted, lams.at[n].set(new.lam), lams)
         folds = jnp.where(new.accepted, folds.at[n].set(new.fold), folds)
@@ -370,7 +396,9 @@ def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Setti
         on_point(0, state)
     stop = "max_points"
     while len(rows) < max_points:
-        state = step(param, state, settings)
+        new = step(param, state, settings)
+        # a rejected attempt keeps the factors of the point it started from
+        state = new if bool(new.accepted) else _replace(new, lu=state.lu, piv=state.piv)
         if not bool(jnp.all(jnp.isfinite(state.y))):
             stop = "nonfinite"
             break
