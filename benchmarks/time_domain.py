@@ -98,7 +98,7 @@ def harmonic_balance(case, f_hz, repeats):
             codes = np.asarray(sols.result).copy()
             for j, i in enumerate(idx):
                 if codes[j] != _hb.CONVERGED and case.has_backlash:
-                    sol = _sweep._backlash_homotopy(problem, omegas[i])
+                    sol = _sweep.backlash_start(problem, omegas[i])
                     ys[j], codes[j] = sol.y, int(sol.result)
             Xs = jnp.stack(ys).reshape((-1,) + problem.shape) * problem.x_scale
             resp = _responses(problem, Xs, jnp.asarray(omegas[idx]), F_static)

@@ -261,19 +261,30 @@ def linear_guess(problem: HBProblem, omega) -> Array:
     so ``g(p) = p - b sign(F_static)``: the backlash shifts the mean deflection by ``b``
     without changing the dynamics. The stiffness variation is dropped (its parametric
     terms need the Newton solve). This is the usual starting point: never start from
-    zero inside the backlash gap.
+    zero inside the backlash gap. Time-invariant equations decouple by harmonic: ``K``
+    systems of ``2n`` unknowns and the mean, not one dense system of ``(2K+1) n``.
     """
     s = problem.system
     _, F_static = static_deflection(s)
     preload = s.W.T @ (s.kbar * s.backlash * jnp.sign(F_static))
-    C, n = problem.shape
+    n = problem.shape[1]
+    K = problem.settings.n_harmonics
     w0 = omega / problem.settings.eta
-    D = jnp.asarray(_aft.derivative_matrix(problem.settings.n_harmonics))
     Kt = s.mean_stiffness()
     Ct = s.C + s.W.T @ (s.damping[:, None] * s.W)
-    L = jnp.kron(jnp.eye(C), Kt) + w0**2 * jnp.kron(D @ D, s.M) + w0 * jnp.kron(D, Ct)
-    X = jnp.linalg.solve(L, problem.forcing.at[0].add(preload).reshape(-1))
-    return X / jnp.tile(problem.x_scale, C)
+    F = problem.forcing.at[0].add(preload)
+    # time-invariant: one (2n, 2n) system per harmonic, rows (cos k, sin k), d/dtau of
+    # (cos, sin) coefficients being k [[0, 1], [-1, 0]] (``_aft.derivative_matrix``)
+    k = jnp.arange(1, K + 1, dtype=float)[:, None, None, None, None]  # (K, a, i, b, j)
+    d = jnp.asarray([[0.0, 1.0], [-1.0, 0.0]])[None, :, None, :, None]
+    i2 = jnp.eye(2)[None, :, None, :, None]
+    lift = lambda A: A[None, None, :, None, :]  # noqa: E731
+    blocks = i2 * lift(Kt) - (k * w0) ** 2 * i2 * lift(s.M) + k * w0 * d * lift(Ct)
+    blocks = blocks.reshape(K, 2 * n, 2 * n)
+    mean = jnp.linalg.solve(Kt, F[0])
+    osc = jnp.linalg.solve(blocks, F[1:].reshape(K, 2 * n, 1))[..., 0].reshape(2 * K, n)
+    X = jnp.concatenate([mean[None], osc])
+    return (X / problem.x_scale).reshape(-1)
 
 
 def newton(problem: HBProblem, omega, y0: Array) -> HBSolution:
@@ -283,8 +294,32 @@ def newton(problem: HBProblem, omega, y0: Array) -> HBSolution:
     ``max_steps`` (max_steps), or on a non-finite value, keeping the last finite
     iterate (nonfinite). Never returns NaN silently: the code says what happened.
     """
-    settings = problem.settings
     omega = jnp.asarray(omega, dtype=float)
+    return _iterate(problem, omega, y0,
+                    lambda y, r: jnp.linalg.solve(jacobian(problem, y, omega), -r))
+
+
+def solve_linear(problem: HBProblem, omega, y0: Array | None = None) -> HBSolution:
+    """The periodic solution of a system without backlash (jit-compatible).
+
+    With zero backlash every mesh force is linear in its deflection, however its
+    stiffness varies in time, so the residual is affine in ``y`` and its Jacobian the
+    same everywhere: it is factorised once (at ``y0``, default :func:`linear_guess`) and
+    every Newton step is a solve with those factors. The first step is exact up to
+    round-off; the next ones refine it and apply :func:`newton`'s convergence test and
+    result codes: one factorisation instead of :func:`newton`'s two. The caller
+    guarantees zero backlash (with backlash this is a chord iteration from ``y0``).
+    """
+    omega = jnp.asarray(omega, dtype=float)
+    y0 = linear_guess(problem, omega) if y0 is None else y0
+    factors = jax.scipy.linalg.lu_factor(jacobian(problem, y0, omega))
+    return _iterate(problem, omega, y0, lambda y, r: jax.scipy.linalg.lu_solve(factors, -r))
+
+
+def _iterate(problem: HBProblem, omega, y0: Array, solve) -> HBSolution:
+    """Newton iterations ``y += solve(y, r(y))`` with the convergence test and codes of
+    :func:`newton`."""
+    settings = problem.settings
 
     def cond(state):
         _, k, _, done, _ = state
@@ -293,7 +328,7 @@ def newton(problem: HBProblem, omega, y0: Array) -> HBSolution:
     def body(state):
         y, k, _, _, _ = state
         r = residual(problem, y, omega)
-        step = jnp.linalg.solve(jacobian(problem, y, omega), -r)
+        step = solve(y, r)
         y_new = y + step
         finite = jnp.all(jnp.isfinite(y_new))
         small = jnp.max(jnp.abs(step)) <= settings.rtol * jnp.maximum(1.0, jnp.max(jnp.abs(y)))

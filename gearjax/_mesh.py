@@ -32,7 +32,8 @@ def backlash(p: Array, b: Array, smoothing: float = 0.0) -> Array:
     ``p`` when ``b = 0``.
     """
     if not smoothing:
-        return p - jnp.clip(p, -b, b)
+        # exactly p where b = 0, derivative included (clip's derivative at p = b = 0 is not 1)
+        return jnp.where(b > 0, p - jnp.clip(p, -b, b), p)
     e = jnp.where(b > 0, smoothing * b, 1.0)  # any e > 0 where b = 0: that branch is unused
     hi, lo = p - b, p + b
     rounded = 0.5 * (hi + jnp.sqrt(hi**2 + e**2)) + 0.5 * (lo - jnp.sqrt(lo**2 + e**2))

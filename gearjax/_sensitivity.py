@@ -370,16 +370,16 @@ class _GearPoint:
         return 2 * math.pi * float(f_hz) / self.mu_ref
 
     def solve(self, f_hz: float, X0=None) -> _hb.HBSolution:
-        """Newton from ``X0`` (or the linear guess); with backlash, the backlash homotopy
-        when Newton from the linear guess fails (as the sweep starts a segment)."""
-        from ._sweep import _backlash_homotopy
+        """Newton from ``X0`` (or the linear guess); with backlash, when Newton from the
+        linear guess fails, ``_sweep.backlash_start`` (as the sweep starts a branch)."""
+        from ._sweep import backlash_start
 
         w = jnp.asarray(self.omega(f_hz))
         sol = solve_at(self.family, self.theta, self.settings, w, X0)
         if int(sol.result) != _hb.CONVERGED and X0 is not None:
             sol = solve_at(self.family, self.theta, self.settings, w, None)
         if int(sol.result) != _hb.CONVERGED and self.has_backlash:
-            sol = _backlash_homotopy(self.problem, w)
+            sol = backlash_start(self.problem, w)
         return sol
 
     def differentiate(self, sol, f_hz, response, fold_tol):
@@ -458,9 +458,9 @@ def sensitivity(
     ``harmonics``: K (default: the sweep's rule at ``at_hz``); ``fold_tol``: the fold
     test on ``min |mu - 1|`` (:func:`point_status`, :data:`FOLD_TOL`).
 
-    The point is solved from the linear in-contact guess (with backlash, by the backlash
-    homotopy if Newton fails), so with coexisting solutions it is the one a sweep
-    starting at ``at_hz`` would start on.
+    The point is solved from the linear in-contact guess (with backlash, if Newton fails,
+    from the orbit a time integration settles to, else by the backlash homotopy), so with
+    coexisting solutions it is the one a sweep starting at ``at_hz`` would start on.
 
     **Returns:** :class:`Sensitivity`; a refused point has ``result`` ``not_converged``,
     ``fold`` or ``unstable``, a ``message`` naming the frequency, and no derivative.

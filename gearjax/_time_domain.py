@@ -296,7 +296,8 @@ def _steady_state(problem: _Problem, omega, x0, v0, settings: TimeDomain) -> Tra
     term = dfx.ODETerm(_vector_field)
     controller = dfx.PIDController(rtol=settings.rtol, atol=settings.atol,
                                    pcoeff=settings.pcoeff, icoeff=settings.icoeff)
-    frac = 2 * jnp.pi * jnp.arange(N + 1) / N
+    # the last sample exactly at the period's end (2 pi j / N rounds above 2 pi for some N)
+    frac = jnp.minimum(2 * jnp.pi * jnp.arange(N + 1) / N, 2 * jnp.pi)
     q = jnp.arange(1, Q + 1)
 
     def one_period(k, z):

@@ -192,7 +192,7 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
 
     ``K`` per point from :func:`~gearjax._sweep.harmonics_rule` (or ``harmonics``);
     one batched Newton solve from the linear guess per distinct ``K``, then, with
-    backlash, the backlash homotopy for each point that failed. ``follow``: first
+    backlash, ``_sweep.backlash_start`` for each point that failed. ``follow``: first
     start each point from the previous converged one (a sweep).
 
     **Returns:** a dict of per-point arrays: ``X`` ``(P, 2Kmax+1, n)`` (coefficients
@@ -235,7 +235,7 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
             for j, i in enumerate(idx):
                 ys[i], result[i] = sols.y[j], int(codes[j])
                 if codes[j] != _hb.CONVERGED and case.has_backlash:
-                    sol = _sweep._backlash_homotopy(problem, omegas[i])
+                    sol = _sweep.backlash_start(problem, omegas[i])
                     ys[i], result[i] = sol.y, int(sol.result)
     for K, problem in problems.items():
         idx = np.flatnonzero(ks == K)

@@ -69,6 +69,33 @@ def test_paper_linear_time_invariant_limit(paper):
     np.testing.assert_allclose(sol.X[1] - 1j * sol.X[2], x1, rtol=1e-8, atol=1e-12 * np.abs(x1).max())
 
 
+def test_linear_guess_and_one_factorisation_solve(paper):
+    """``linear_guess`` (one (2n, 2n) system per harmonic) is the exact response of the
+    constant-stiffness train without backlash (the complex FRF of every harmonic);
+    ``solve_linear`` (one factorisation) equals Newton on the time-varying train without
+    backlash, whose mesh force is linear: ``g' = 1`` also at ``p = 0``."""
+    omega = 2 * np.pi * 3000.0 / 7
+    lti = eqx_set(paper, k_cos=jnp.zeros_like(paper.k_cos), k_sin=jnp.zeros_like(paper.k_sin),
+                  backlash=jnp.zeros_like(paper.backlash))
+    problem = _hb.hb_problem(lti, _hb.HarmonicBalance(n_harmonics=8))
+    X = _hb.linear_guess(problem, omega).reshape(problem.shape) * problem.x_scale
+    Kt, M = np.asarray(lti.mean_stiffness()), np.asarray(lti.M)
+    Ct = np.asarray(lti.C + lti.W.T @ (lti.damping[:, None] * lti.W))
+    F = np.asarray(problem.forcing)
+    for k in range(1, 9):
+        Z = Kt - (k * omega) ** 2 * M + 1j * k * omega * Ct
+        xk = np.linalg.solve(Z, F[2 * k - 1] - 1j * F[2 * k])
+        scale = np.abs(xk).max() + 1e-30
+        np.testing.assert_allclose(X[2 * k - 1] - 1j * X[2 * k], xk, atol=1e-10 * scale)
+    np.testing.assert_allclose(X[0], np.linalg.solve(Kt, F[0]), rtol=1e-10)
+    assert float(jax.grad(lambda p: gj.backlash(p, 0.0))(0.0)) == 1.0
+    tv = _hb.hb_problem(eqx_set(paper, backlash=jnp.zeros_like(paper.backlash)),
+                        _hb.HarmonicBalance(n_harmonics=8))
+    one, ref = _hb.solve_linear(tv, omega), _hb.solve_hb(tv, omega)
+    assert int(one.result) == _hb.CONVERGED and int(one.steps) <= 3
+    np.testing.assert_allclose(one.X, ref.X, rtol=0, atol=1e-10 * float(jnp.max(jnp.abs(ref.X))))
+
+
 def eqx_set(system, **fields):
     return dataclasses.replace(system, **fields)
 

@@ -75,6 +75,16 @@ def test_linear_oscillator_amplitude_is_analytic():
     np.testing.assert_allclose(2 * spectrum[:, 1], H, rtol=1e-6)  # phase too (t = 0 is phase 0)
 
 
+def test_sample_count_need_not_be_a_power_of_two():
+    """``2 pi j / N`` rounds above the period's end for some ``N`` (260 here), which diffrax
+    refuses as a save time outside the interval: the last sample is pinned to it."""
+    settings = gj.TimeDomain(n_samples=260, periodic_tol=1e-9, max_periods=400)
+    tr = gj.simulate(oscillator(), 1.0, settings=settings)
+    assert int(tr.result) == td.PERIODIC and tr.x.shape == (1, 260)
+    spectrum = np.fft.rfft(np.asarray(tr.x[0])) / 260
+    np.testing.assert_allclose(2 * spectrum[1], 0.03 / (0.1j), rtol=1e-6)
+
+
 def test_hb_initial_state_starts_on_the_orbit():
     """The harmonic-balance state at t = 0 is the linear orbit: periodic after one period."""
     system = oscillator()
