@@ -615,7 +615,7 @@ def _solve_points(problem, omegas):
     linear guess: one factorisation each without backlash (``_hb.solve_linear``), Newton
     with backlash. One point after the other (``lax.map``): vmapped, Newton's batch of
     dense factorisations ran 1.3x slower at K = 64 (1.04x at K = 32) on 2 cores."""
-    if bool(jnp.any(problem.system.backlash > 0)):
+    if _has_backlash(problem):
         return _newton_points(problem, omegas)
     return _linear_points(problem, omegas)
 
@@ -655,29 +655,35 @@ def _enter_segment(problem, param, previous, lam, omega_ref, guess=None):
 def start_point(problem, omega, state=None):
     """``(y, result code)`` at ``omega``: Newton from the linear, in-contact guess; with
     backlash, when that fails, :func:`backlash_start`. With a ``state`` ``(x0, v0)``
-    (where a branch left off) the time integration from it comes first."""
-    if state is not None and bool(jnp.any(problem.system.backlash > 0)):
+    (where a branch left off) the time integration starts from it, and before Newton."""
+    backlash = _has_backlash(problem)
+    if state is not None and backlash:
         sol = settled_start(problem, omega, state)
         if int(sol.result) == _hb.CONVERGED:
             return sol.y, _hb.CONVERGED
     sol = _newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
-    if int(sol.result) != _hb.CONVERGED and bool(jnp.any(problem.system.backlash > 0)):
-        sol = backlash_start(problem, omega, skip_settle=state is not None)
+    if int(sol.result) != _hb.CONVERGED and backlash:
+        # the integration from ``state`` failed already: straight to the homotopy
+        sol = backlash_start(problem, omega) if state is None else _backlash_homotopy(
+            problem, omega)
     return sol.y, int(sol.result)
 
 
-def backlash_start(problem, omega, skip_settle: bool = False) -> _hb.HBSolution:
+def backlash_start(problem, omega) -> _hb.HBSolution:
     """A periodic solution with backlash where Newton from the linear guess fails (tooth
     separation far from the in-contact response): Newton from the orbit that a time
     integration settles to (:func:`settled_start`), else the homotopy in backlash 0 -> b
     (:func:`_backlash_homotopy`, a continuation of a few hundred points at the full K:
     measured on the paper case at 3306 Hz, K = 64, 374 points and 54 s against 0.4 s for
     the integration and Newton, which reach the same orbit within 7e-12)."""
-    if not skip_settle:
-        sol = settled_start(problem, omega)
-        if int(sol.result) == _hb.CONVERGED:
-            return sol
+    sol = settled_start(problem, omega)
+    if int(sol.result) == _hb.CONVERGED:
+        return sol
     return _backlash_homotopy(problem, omega)
+
+
+def _has_backlash(problem) -> bool:
+    return bool(jnp.any(problem.system.backlash > 0))
 
 
 SETTLE_PERIODS = 40
