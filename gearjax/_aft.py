@@ -50,6 +50,36 @@ def analysis(x: jnp.ndarray, n_harmonics: int) -> jnp.ndarray:
     return jnp.moveaxis(out, -1, 0)
 
 
+def product_matrix(a: jnp.ndarray, n_harmonics: int) -> jnp.ndarray:
+    """``M`` with ``analysis(a * synthesis(X, T), K) == M @ X``: multiplication by the
+    sampled signal ``a`` ``(..., T)`` (samples on the last axis), ``(..., 2K+1, 2K+1)``.
+
+    Assembled from the DFT ``A_q`` of the samples (product to sum: ``a cos(l tau)`` has
+    the complex harmonics ``(A_{k-l} + A_{k+l}) / 2``, indices mod ``T``, so aliasing is
+    the AFT's own): one FFT of ``T`` samples instead of ``2K+1`` pairs of FFTs.
+    """
+    n_time, K = a.shape[-1], n_harmonics
+    A = jnp.fft.fft(a, axis=-1) / n_time  # A_q at index q mod T
+    k = np.arange(K + 1)[:, None]
+    l = np.arange(1, K + 1)[None, :]
+    lo, hi = A[..., (k - l) % n_time], A[..., (k + l) % n_time]  # (..., K+1, K)
+    F = jnp.concatenate([A[..., k % n_time],  # column 0: the constant
+                         jnp.stack([(lo + hi) / 2, (lo - hi) / 2j], axis=-1).reshape(
+                             lo.shape[:-1] + (2 * K,))], axis=-1)  # (..., K+1, 2K+1)
+    rows = jnp.stack([2 * F[..., 1:, :].real, -2 * F[..., 1:, :].imag], axis=-2)
+    return jnp.concatenate([F[..., :1, :].real, rows.reshape(F.shape[:-2] + (2 * K, 2 * K + 1))],
+                           axis=-2)
+
+
+def times_derivative(M: jnp.ndarray) -> jnp.ndarray:
+    """``M @ derivative_matrix(K)`` for ``M`` ``(..., r, 2K+1)``, by columns."""
+    K = (M.shape[-1] - 1) // 2
+    k = jnp.arange(1, K + 1)
+    out = jnp.zeros_like(M)
+    out = out.at[..., 1::2].set(-k * M[..., 2::2])
+    return out.at[..., 2::2].set(k * M[..., 1::2])
+
+
 def derivative(X: jnp.ndarray) -> jnp.ndarray:
     """Coefficients of ``dx/dtau``: ``cos_k <- k sin_k``, ``sin_k <- -k cos_k``."""
     K = (X.shape[0] - 1) // 2

@@ -211,19 +211,26 @@ def jacobian(problem: HBProblem, y: Array, omega) -> Array:
 
 
 def mesh_blocks(problem: HBProblem, P: Array, omega) -> Array:
-    """``J_m = d F_hat_m / d P_m``, shape ``(m, 2K+1, 2K+1)``, by forward-mode autodiff."""
-    s, T, K = problem.system, problem.n_time, problem.settings.n_harmonics
+    """``J_m = d F_hat_m / d P_m``, shape ``(m, 2K+1, 2K+1)``.
+
+    The mesh force is a function of each sample's deflection and rate, so with
+    ``a = dF/dp`` and ``b = dF/dp'`` at the ``T`` samples (exact, forward-mode through
+    the shared mesh force) ``J_m = A(a) + omega_0 A(b) D``, ``A`` the AFT matrix of a
+    multiplication (``_aft.product_matrix``, from one FFT of the samples) and ``D`` the
+    derivative matrix.
+    """
+    s, K = problem.system, problem.settings.n_harmonics
+    p, p_dot, _ = mesh_samples(problem, P, omega)
     w0 = omega / problem.settings.eta
 
-    def one_mesh(P_m, kappa, te, te_rate, kbar, b, c):
-        p = _aft.synthesis(P_m, T) - te
-        p_dot = w0 * (_aft.synthesis(_aft.derivative(P_m), T) - te_rate)
-        return _aft.analysis(mesh_force(p, p_dot, kappa, kbar, b, c, s.contact_damping,
-                                        problem.settings.smoothing), K)
+    def force(p, p_dot):
+        return mesh_force(p, p_dot, problem.kappa, s.kbar[:, None], s.backlash[:, None],
+                          s.damping[:, None], s.contact_damping, problem.settings.smoothing)
 
-    block = jax.jacfwd(one_mesh)
-    return jax.vmap(block)(P.T, problem.kappa, problem.te, problem.te_rate, s.kbar, s.backlash,
-                           s.damping)
+    ones = jnp.ones_like(p)
+    a = jax.jvp(lambda q: force(q, p_dot), (p,), (ones,))[1]  # elementwise: the diagonal
+    b = jax.jvp(lambda v: force(p, v), (p_dot,), (ones,))[1]
+    return _aft.product_matrix(a, K) + w0 * _aft.times_derivative(_aft.product_matrix(b, K))
 
 
 def omega_derivative(problem: HBProblem, y: Array, omega) -> Array:

@@ -53,7 +53,11 @@ Oteo & Ros, Phys. Rep. 470 (2009) 151). Why this and not a Runge-Kutta method:
   part of the second Magnus term only affects the switching steps;
 - steps are independent: the exponents and exponentials of a chunk of steps are
   formed as one batch and multiplied as a balanced tree, inside a ``jax.lax.scan``
-  over the chunks: fixed shapes (jit, and vmap over points), little memory.
+  over the chunks: fixed shapes (jit, and vmap over points), little memory. The
+  stiffness at the Gauss points is a function of phase, the same for every ``Omega``:
+  under ``vmap`` over the points of a sweep it is evaluated once. The commutator is
+  formed from ``n x n`` blocks (:func:`_magnus_exponent`): one product of ``n x n``
+  matrices with the damping everywhere, instead of two of ``2n x 2n``.
 
 Step rule (:func:`floquet_steps`): ``N`` is the power of two with at least 32 steps
 per period of the highest harmonic of ``tau`` in the solution or the excitation,
@@ -115,8 +119,11 @@ The paper's near-rigid mode scores 7.5e-5, its elastic and penalty modes 0.4 and
 HILL_TIE_BREAK = 1e-3
 """Offset of the harmonic-centre criterion of Hill's method (prefers centre +1/2 to -1/2)."""
 
-CHUNK = 64
-"""Steps whose exponentials are formed together (a batch inside the scan over the period)."""
+CHUNK = 16
+"""Steps whose exponentials are formed together (a batch inside the scan over the period).
+With the sweep's chunks of 8 points (``_sweep.POST_CHUNK``) a batch holds 128 matrices of
+28 x 28 on the paper case, which stay in the 1 MiB per-core L2 cache: measured on 2
+cores, 27 ms a point at K = 64 and 13 ms at K = 32, against 54 and 18 ms with 64 steps."""
 
 
 # ------------------------------------------------------------------------ helpers
@@ -188,13 +195,16 @@ class _Orbit(eqx.Module):
         e, de = _mesh_series(s.te_cos, s.te_sin, mu, 1.0, _aft.phases(n)[:, None])
         return p - e, dp - self.w0 * de
 
-    def kappa(self, t):
-        """Stiffness ``(T, m)`` at common times ``t`` ``(T,)``: the shared ``fourier_series``."""
-        s = self.problem.system
-        if s.k_cos.shape[-1] == 0:
-            return jnp.ones(t.shape + (s.n_meshes,))
-        mu = jnp.asarray(s.mesh_mu)
-        return 1.0 + fourier_series(s.k_cos, s.k_sin, mu, self.omega, t).T
+
+def _kappa_at_phases(problem: HBProblem, tau: Array) -> Array:
+    """Stiffness ``kappa`` ``(T, m)`` at base phases ``tau = omega_0 t`` ``(T,)`` (the shared
+    ``fourier_series``). In phase it does not depend on ``Omega``: under ``vmap`` over the
+    points of a sweep it is evaluated once."""
+    s = problem.system
+    if s.k_cos.shape[-1] == 0:
+        return jnp.ones(tau.shape + (s.n_meshes,))
+    mu = jnp.asarray(s.mesh_mu) * problem.settings.eta
+    return 1.0 + fourier_series(s.k_cos, s.k_sin, mu, 1.0, tau).T
 
 
 def _contact_intervals(p0, p1, dp0, dp1, h, b):
@@ -240,8 +250,10 @@ class _Frame(eqx.Module):
 
     Linv: Array  # (n, n)
     Wt: Array  # (m, n): W L^-T
+    WW: Array  # (m, n * n): the outer products w~_m w~_m^T of the rows of Wt
     Kt: Array  # (n, n): L^-1 K L^-T
     Ct: Array  # (n, n): L^-1 C L^-T
+    Cm: Array  # (n, n): Ct + sum_m c_m w~_m w~_m^T (the damping when it acts everywhere)
     ws: Array  # scale frequency (rad/s)
 
 
@@ -254,41 +266,54 @@ def _frame(problem: HBProblem) -> _Frame:
     Wt = s.W @ Linv.T
     Km = Kt + Wt.T @ (s.kbar[:, None] * Wt)
     ws = jnp.sqrt(jnp.maximum(jnp.max(jnp.linalg.eigvalsh(0.5 * (Km + Km.T))), 1e-300))
-    return _Frame(Linv=Linv, Wt=Wt, Kt=Kt, Ct=Ct, ws=ws)
+    WW = (Wt[:, :, None] * Wt[:, None, :]).reshape(s.n_meshes, -1)
+    Cm = Ct + Wt.T @ (s.damping[:, None] * Wt)
+    return _Frame(Linv=Linv, Wt=Wt, WW=WW, Kt=Kt, Ct=Ct, Cm=Cm, ws=ws)
 
 
-def _step_exponents(problem, frame, orbit, t0, h, ends):
-    """Magnus exponents ``(c, 2n, 2n)`` of ``c`` steps starting at times ``t0`` ``(c,)``;
-    ``ends``: ``(p0, p1, dp0, dp1)``, each ``(c, m)``, the mesh deflections and rates at
-    the step ends."""
+def _step_exponents(problem, frame, kappa, h, ends):
+    """Magnus exponents ``(c, 2n, 2n)`` of ``c`` steps of ``h`` seconds.
+
+    ``kappa``: ``(k_a, k_b)``, each ``(c, m)``, the stiffness at the two Gauss points of
+    every step; ``ends``: ``(p0, p1, dp0, dp1)``, each ``(c, m)``, the mesh deflections
+    and rates at the step ends.
+    """
     s = problem.system
     g = 0.5 / np.sqrt(3.0)
-    k_a = orbit.kappa(t0 + (0.5 - g) * h)  # (c, m) at the two Gauss points
-    k_b = orbit.kappa(t0 + (0.5 + g) * h)
+    k_a, k_b = kappa
     alpha, beta = 0.5 * (k_a + k_b), (k_b - k_a) / (2 * g)  # kappa = alpha + beta (s - 1/2)
     u, v = _contact_intervals(*ends, h, s.backlash)  # (2, c, m)
     k0, k1 = (jnp.sum(x, axis=0) for x in _moments(alpha, beta, u, v))
     k0, k1 = h * k0, h**2 * k1  # int kappa g' dt, int kappa g' (t - t_mid) dt over the step
+    n, ws = s.n_dof, frame.ws
+
+    def mesh_sum(weights):  # sum_m weights_m w~_m w~_m^T: (c, m) -> (c, n, n)
+        return (weights @ frame.WW).reshape(weights.shape[:-1] + (n, n))
+
+    S = (h * frame.Kt + mesh_sum(k0 * s.kbar)) / ws
+    S1 = mesh_sum(k1 * s.kbar) / ws
     if s.contact_damping:
         c0, c1 = (jnp.sum(x, axis=0) for x in _moments(1.0, 0.0, u, v))
-        c0, c1 = h * c0, h**2 * c1
+        D = h * frame.Ct + mesh_sum(h * c0 * s.damping)
+        D1 = mesh_sum(h**2 * c1 * s.damping)
     else:
-        c0, c1 = jnp.full_like(k0, h), jnp.zeros_like(k1)
-    Wt, ws = frame.Wt, frame.ws
+        D, D1 = jnp.broadcast_to(h * frame.Cm, S.shape), None
+    return _magnus_exponent(D, D1, S, S1, h, ws)
 
-    def mesh_sum(weights, coefficient):
-        return jnp.einsum("mi,cm,mj->cij", Wt, weights * coefficient, Wt)
 
-    stiff0 = (h * frame.Kt + mesh_sum(k0, s.kbar)) / ws
-    damp0 = h * frame.Ct + mesh_sum(c0, s.damping)
-    stiff1, damp1 = mesh_sum(k1, s.kbar) / ws, mesh_sum(c1, s.damping)
-    eye = jnp.broadcast_to(h * ws * jnp.eye(s.n_dof), stiff0.shape)
-    zero = jnp.zeros_like(stiff0)
-    A0 = jnp.concatenate([jnp.concatenate([-damp0, eye], -1),
-                          jnp.concatenate([-stiff0, zero], -1)], -2)
-    A1 = jnp.concatenate([jnp.concatenate([-damp1, zero], -1),
-                          jnp.concatenate([-stiff1, zero], -1)], -2)
-    return A0 + (A1 @ A0 - A0 @ A1) / h
+def _magnus_exponent(D, D1, S, S1, h, ws):
+    """``A0 + [A1, A0] / h`` from its ``(c, n, n)`` blocks, ``A0 = [[-D, e I], [-S, 0]]``,
+    ``A1 = [[-D1, 0], [-S1, 0]]``, ``e = h w_s`` (``D1 = None``: zero, the damping acting
+    everywhere). The commutator takes ``n x n`` products, not ``2n x 2n`` ones:
+    ``[A1, A0] = [[D1 D - D D1 + e S1, -e D1], [S1 D - S D1, -e S1]]``."""
+    eye = jnp.broadcast_to(h * ws * jnp.eye(S.shape[-1]), S.shape)
+    if D1 is None:
+        top = jnp.concatenate([-D + ws * S1, eye], -1)
+        bottom = jnp.concatenate([-S + (S1 @ D) / h, -ws * S1], -1)
+    else:
+        top = jnp.concatenate([-D + (D1 @ D - D @ D1) / h + ws * S1, eye - ws * D1], -1)
+        bottom = jnp.concatenate([-S + (S1 @ D - S @ D1) / h, -ws * S1], -1)
+    return jnp.concatenate([top, bottom], -2)
 
 
 _TAYLOR_DEGREE = 16
@@ -301,7 +326,7 @@ def _expm(A):
 
     Matrix products only (a library ``expm`` evaluates all its Pade orders under ``vmap``,
     and a linear solve costs more to compile than the products it saves): the degree-16
-    polynomial in Paterson-Stockmeyer form takes 7 products; the number of squarings is
+    polynomial in Paterson-Stockmeyer form takes 6 products; the number of squarings is
     per matrix, ``ceil(log2(||A||_1 / 0.8))``.
     """
     norm = jnp.max(jnp.sum(jnp.abs(A), axis=-2), axis=-1)
@@ -316,8 +341,8 @@ def _expm(A):
     def block(j):  # sum_{i<4} coef[4j + i] A^i
         return coef[4 * j] * eye + coef[4 * j + 1] * A + coef[4 * j + 2] * A2 + coef[4 * j + 3] * A3
 
-    E = coef[16] * eye
-    for j in (3, 2, 1, 0):
+    E = block(3) + coef[16] * A4
+    for j in (2, 1, 0):
         E = block(j) + A4 @ E
 
     def square(state):
@@ -353,14 +378,17 @@ def _monodromy_scaled(problem: HBProblem, X, omega, n_steps: int | None):
     p, dp = orbit.on_grid(n_steps)  # (N, m) at the step starts
     by_chunk = lambda a: a.reshape(n_steps // chunk, chunk, -1)  # noqa: E731
     ends = tuple(by_chunk(a) for a in (p, jnp.roll(p, -1, axis=0), dp, jnp.roll(dp, -1, axis=0)))
+    g = 0.5 / np.sqrt(3.0)
+    step = 2 * np.pi / n_steps
+    kappa = tuple(by_chunk(_kappa_at_phases(problem, step * (np.arange(n_steps) + 0.5 + x)))
+                  for x in (-g, g))  # at the two Gauss points of every step
 
     def body(Phi, inputs):
-        j, ends = inputs
-        t0 = (j * chunk + jnp.arange(chunk)) * h
-        E = _expm(_step_exponents(problem, frame, orbit, t0, h, ends))
+        kappa, ends = inputs
+        E = _expm(_step_exponents(problem, frame, kappa, h, ends))
         return _tree_product(E) @ Phi, None
 
-    Phi, _ = jax.lax.scan(body, jnp.eye(2 * s.n_dof), (jnp.arange(n_steps // chunk), ends))
+    Phi, _ = jax.lax.scan(body, jnp.eye(2 * s.n_dof), (kappa, ends))
     return Phi, frame, orbit
 
 
@@ -429,12 +457,10 @@ def hill_exponents(problem: HBProblem, X: Array, omega) -> Complex[Array, " 2n"]
     D = jnp.asarray(_aft.derivative_matrix(K))
     I = jnp.eye(C)
     # AFT blocks of the mesh stiffness kbar kappa g'(p) (the stiffness half of _hb.mesh_blocks)
-    synth = _aft.synthesis(jnp.eye(C), T)  # (T, C)
-    anal = _aft.analysis(jnp.eye(T), K)  # (C, T)
     p = _aft.synthesis(X @ s.W.T, T).T - problem.te  # (m, T)
     gk = s.kbar[:, None] * problem.kappa * in_contact(p, s.backlash[:, None])
-    Jk = jnp.einsum("at,mt,tb->mab", anal, gk, synth)
-    Ct = frame.Ct + Wt.T @ (s.damping[:, None] * Wt)  # damping acts everywhere: Jc_m = c_m I
+    Jk = _aft.product_matrix(gk, K)  # (m, C, C)
+    Ct = frame.Cm  # damping acts everywhere: Jc_m = c_m I
     mesh = jnp.einsum("mab,mi,mj->aibj", Jk, Wt, Wt).reshape(C * n, C * n)
     M1 = jnp.kron(2 * w0 * D, jnp.eye(n)) + jnp.kron(I, Ct)
     M0 = (jnp.kron(I, frame.Kt) + w0**2 * jnp.kron(D @ D, jnp.eye(n)) + w0 * jnp.kron(D, Ct)

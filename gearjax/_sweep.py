@@ -749,9 +749,9 @@ def _backlash_homotopy(problem, omega):
 
 POST_CHUNK = 8
 """Points per compiled call of the post-processing (responses + Floquet). The step
-exponentials of a chunk of points stay in cache: measured on 2 cores, the Floquet
-stability of the paper case costs 35 ms a point at K = 64 in chunks of 4 or 8 points,
-53 ms in chunks of 16 and 65 ms in chunks of 32 (16 / 16 / 23 / 29 ms at K = 32)."""
+exponentials of a chunk of points (``_stability.CHUNK`` steps each) stay in cache:
+measured on 2 cores, responses and Floquet stability of the paper case cost 27 ms a point
+at K = 64 in chunks of 8 points and 26 ms in chunks of 16 (13 and 12 ms at K = 32)."""
 
 
 def _point_rows(problem, Xs, omegas, results, F_static):

@@ -100,10 +100,26 @@ def eqx_set(system, **fields):
     return dataclasses.replace(system, **fields)
 
 
+@pytest.mark.parametrize("n_time", [64, 14])
+def test_product_matrix_is_the_aft_of_a_multiplication(n_time):
+    """``_aft.product_matrix(a)`` (from one FFT of ``a``) equals the AFT map
+    ``X -> analysis(a * synthesis(X))`` column by column, aliasing included (T = 2K + 2);
+    ``times_derivative(M)`` equals ``M @ derivative_matrix``."""
+    K = 6
+    a = jax.random.normal(jax.random.PRNGKey(2), (3, n_time))
+    M = _aft.product_matrix(a, K)
+    E = jnp.eye(2 * K + 1)
+    ref = jnp.stack([_aft.analysis(a[i][:, None] * _aft.synthesis(E, n_time), K) for i in range(3)])
+    np.testing.assert_allclose(M, ref, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(_aft.times_derivative(M), M @ _aft.derivative_matrix(K),
+                               rtol=0, atol=1e-14)
+
+
 @pytest.mark.parametrize("contact", [False, True])
-def test_structured_jacobian_equals_jacfwd(paper, contact):
+@pytest.mark.parametrize("n_time", [64, 14])  # 14 = 2K + 2: products alias, as in the AFT
+def test_structured_jacobian_equals_jacfwd(paper, contact, n_time):
     system = eqx_set(paper, contact_damping=contact)
-    problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=6, n_time=64))
+    problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=6, n_time=n_time))
     y = _hb.linear_guess(problem, 2 * np.pi * 4000 / 7)
     y = y + 0.5 * jax.random.normal(jax.random.PRNGKey(0), y.shape)  # some meshes separate
     omega = 2 * np.pi * 4000 / 7

@@ -315,3 +315,20 @@ def test_step_count_must_be_a_power_of_two():
     X = jnp.zeros(problem.shape)
     with pytest.raises(ValueError, match="n_steps must be a power of two >= 2"):
         gj.floquet_multipliers(problem, X, 0.5, n_steps=1000)
+
+
+@pytest.mark.parametrize("contact_damping", [False, True])
+def test_magnus_exponent_blocks_equal_the_full_commutator(contact_damping):
+    """The step exponent assembled from n x n blocks equals ``A0 + (A1 A0 - A0 A1) / h``
+    formed with full 2n x 2n products (random blocks, n = 5, a batch of 3 steps)."""
+    rng = np.random.default_rng(3)
+    c, n, h, ws = 3, 5, 0.7, 2.5
+    D, D1, S, S1 = (jnp.asarray(rng.standard_normal((c, n, n))) for _ in range(4))
+    if not contact_damping:
+        D1 = None
+    zero, eye = jnp.zeros((c, n, n)), jnp.broadcast_to(h * ws * jnp.eye(n), (c, n, n))
+    A0 = jnp.block([[-D, eye], [-S, zero]])
+    A1 = jnp.block([[zero if D1 is None else -D1, zero], [-S1, zero]])
+    expected = A0 + (A1 @ A0 - A0 @ A1) / h
+    np.testing.assert_allclose(_stability._magnus_exponent(D, D1, S, S1, h, ws), expected,
+                               rtol=1e-13, atol=1e-13)
