@@ -110,15 +110,23 @@ class HBProblem(eqx.Module):
         return self.shape[0] * self.shape[1]
 
 
+def stiffness_at_phases(system: System, eta: int, tau: Array) -> Array:
+    """Dimensionless mesh stiffness ``kappa_m`` ``(m, T)`` at base phases ``tau``
+    ``(T,)`` (rad, ``tau = Omega t / eta``): the shared ``fourier_series``, independent of
+    ``Omega``."""
+    if system.k_cos.shape[-1] == 0:
+        return jnp.ones((system.n_meshes,) + tau.shape)
+    mu = jnp.asarray(system.mesh_mu) * eta
+    return 1.0 + fourier_series(system.k_cos, system.k_sin, mu, 1.0, tau)
+
+
 def hb_problem(system: System, settings: HarmonicBalance = HarmonicBalance()) -> HBProblem:
     """Precompute the Omega-independent parts of the harmonic balance of ``system``."""
     K, eta = settings.n_harmonics, settings.eta
     T = settings.n_time or time_samples(K, system, eta)
     tau = _aft.phases(T)
     mu = jnp.asarray(system.mesh_mu) * eta
-    H = system.k_cos.shape[-1]
-    kappa = 1.0 + fourier_series(system.k_cos, system.k_sin, mu, 1.0, tau) if H else jnp.ones(
-        (system.n_meshes, T))
+    kappa = stiffness_at_phases(system, eta, tau)
     He = system.te_cos.shape[-1]
     if He:
         order = jnp.arange(1, He + 1)[None, :] * mu[:, None]
@@ -145,13 +153,18 @@ def mesh_samples(problem: HBProblem, P: Array, omega) -> tuple[Array, Array, Arr
     """Deflection (m), its rate (m/s) and the mesh force (N) of every mesh at the ``T``
     AFT instants, each ``(m, T)``, from the deflection harmonics ``P`` ``(2K+1, m)``
     (coefficients of ``w_m . x``; the transmission error is removed here)."""
-    s, T = problem.system, problem.n_time
+    T = problem.n_time
     w0 = omega / problem.settings.eta
     p = _aft.synthesis(P, T).T - problem.te
     p_dot = w0 * (_aft.synthesis(_aft.derivative(P), T).T - problem.te_rate)
-    F = mesh_force(p, p_dot, problem.kappa, s.kbar[:, None], s.backlash[:, None],
-                   s.damping[:, None], s.contact_damping, problem.settings.smoothing)
-    return p, p_dot, F
+    return p, p_dot, _sampled_force(problem, p, p_dot)
+
+
+def _sampled_force(problem: HBProblem, p: Array, p_dot: Array) -> Array:
+    """The shared ``mesh_force`` at the ``(m, T)`` AFT samples of deflection and rate."""
+    s = problem.system
+    return mesh_force(p, p_dot, problem.kappa, s.kbar[:, None], s.backlash[:, None],
+                      s.damping[:, None], s.contact_damping, problem.settings.smoothing)
 
 
 def mesh_force_harmonics(problem: HBProblem, P: Array, omega) -> Array:
@@ -219,17 +232,13 @@ def mesh_blocks(problem: HBProblem, P: Array, omega) -> Array:
     multiplication (``_aft.product_matrix``, from one FFT of the samples) and ``D`` the
     derivative matrix.
     """
-    s, K = problem.system, problem.settings.n_harmonics
+    K = problem.settings.n_harmonics
     p, p_dot, _ = mesh_samples(problem, P, omega)
     w0 = omega / problem.settings.eta
-
-    def force(p, p_dot):
-        return mesh_force(p, p_dot, problem.kappa, s.kbar[:, None], s.backlash[:, None],
-                          s.damping[:, None], s.contact_damping, problem.settings.smoothing)
-
     ones = jnp.ones_like(p)
-    a = jax.jvp(lambda q: force(q, p_dot), (p,), (ones,))[1]  # elementwise: the diagonal
-    b = jax.jvp(lambda v: force(p, v), (p_dot,), (ones,))[1]
+    # the force at a sample depends on that sample only: a JVP with ones is the diagonal
+    a = jax.jvp(lambda q: _sampled_force(problem, q, p_dot), (p,), (ones,))[1]
+    b = jax.jvp(lambda v: _sampled_force(problem, p, v), (p_dot,), (ones,))[1]
     return _aft.product_matrix(a, K) + w0 * _aft.times_derivative(_aft.product_matrix(b, K))
 
 

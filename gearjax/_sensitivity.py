@@ -364,7 +364,7 @@ class _GearPoint:
         self.settings = _hb.HarmonicBalance(n_harmonics=int(harmonics))
         self.problem = _problem_jit(self.family, self.theta, self.settings)
         self.system = self.problem.system
-        self.has_backlash = bool(np.any(np.asarray(self.system.backlash) > 0))
+        self.has_backlash = self.system.has_backlash
 
     def omega(self, f_hz: float) -> float:
         return 2 * math.pi * float(f_hz) / self.mu_ref

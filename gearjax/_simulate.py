@@ -78,7 +78,7 @@ class GearCase:
 
     @property
     def has_backlash(self) -> bool:
-        return bool(np.any(np.asarray(self.system.backlash) > 0))
+        return self.system.has_backlash
 
     def point_coordinates(self, f_hz) -> dict:
         """``mesh_frequency_hz``, ``stage_mesh_frequency_hz``, ``input_rpm``, ``omega`` and

@@ -108,8 +108,8 @@ import numpy as np
 from jaxtyping import Array, Bool, Complex, Float
 
 from . import _aft
-from ._hb import HBProblem, highest_excitation
-from ._mesh import fourier_series, in_contact
+from ._hb import HBProblem, highest_excitation, stiffness_at_phases
+from ._mesh import in_contact
 
 RIGID_STRAIN = 1e-3
 """A Floquet mode strains no mesh if ``max_m |w_m . dz| <= RIGID_STRAIN max_i lever_i |dz_i|``,
@@ -118,6 +118,9 @@ The paper's near-rigid mode scores 7.5e-5, its elastic and penalty modes 0.4 and
 
 HILL_TIE_BREAK = 1e-3
 """Offset of the harmonic-centre criterion of Hill's method (prefers centre +1/2 to -1/2)."""
+
+_GAUSS = 0.5 / np.sqrt(3.0)
+"""Offset of the two Gauss points from the middle of a step, in steps."""
 
 CHUNK = 16
 """Steps whose exponentials are formed together (a batch inside the scan over the period).
@@ -196,17 +199,6 @@ class _Orbit(eqx.Module):
         return p - e, dp - self.w0 * de
 
 
-def _kappa_at_phases(problem: HBProblem, tau: Array) -> Array:
-    """Stiffness ``kappa`` ``(T, m)`` at base phases ``tau = omega_0 t`` ``(T,)`` (the shared
-    ``fourier_series``). In phase it does not depend on ``Omega``: under ``vmap`` over the
-    points of a sweep it is evaluated once."""
-    s = problem.system
-    if s.k_cos.shape[-1] == 0:
-        return jnp.ones(tau.shape + (s.n_meshes,))
-    mu = jnp.asarray(s.mesh_mu) * problem.settings.eta
-    return 1.0 + fourier_series(s.k_cos, s.k_sin, mu, 1.0, tau).T
-
-
 def _contact_intervals(p0, p1, dp0, dp1, h, b):
     """Sub-intervals ``[u, v]`` (normalised to [0, 1]) of each step where a flank touches.
 
@@ -279,9 +271,8 @@ def _step_exponents(problem, frame, kappa, h, ends):
     and rates at the step ends.
     """
     s = problem.system
-    g = 0.5 / np.sqrt(3.0)
     k_a, k_b = kappa
-    alpha, beta = 0.5 * (k_a + k_b), (k_b - k_a) / (2 * g)  # kappa = alpha + beta (s - 1/2)
+    alpha, beta = 0.5 * (k_a + k_b), (k_b - k_a) / (2 * _GAUSS)  # kappa = alpha + beta (s - 1/2)
     u, v = _contact_intervals(*ends, h, s.backlash)  # (2, c, m)
     k0, k1 = (jnp.sum(x, axis=0) for x in _moments(alpha, beta, u, v))
     k0, k1 = h * k0, h**2 * k1  # int kappa g' dt, int kappa g' (t - t_mid) dt over the step
@@ -378,10 +369,11 @@ def _monodromy_scaled(problem: HBProblem, X, omega, n_steps: int | None):
     p, dp = orbit.on_grid(n_steps)  # (N, m) at the step starts
     by_chunk = lambda a: a.reshape(n_steps // chunk, chunk, -1)  # noqa: E731
     ends = tuple(by_chunk(a) for a in (p, jnp.roll(p, -1, axis=0), dp, jnp.roll(dp, -1, axis=0)))
-    g = 0.5 / np.sqrt(3.0)
+    # the stiffness at the two Gauss points of every step, in phase: the same for every
+    # Omega, so under vmap over the points of a sweep it is evaluated once
     step = 2 * np.pi / n_steps
-    kappa = tuple(by_chunk(_kappa_at_phases(problem, step * (np.arange(n_steps) + 0.5 + x)))
-                  for x in (-g, g))  # at the two Gauss points of every step
+    kappa = tuple(by_chunk(stiffness_at_phases(s, problem.settings.eta, jnp.asarray(
+        step * (np.arange(n_steps) + 0.5 + x))).T) for x in (-_GAUSS, _GAUSS))
 
     def body(Phi, inputs):
         kappa, ends = inputs

@@ -36,7 +36,6 @@ from ._kinematics import kinematics, require_base
 from ._responses import mesh_responses, static_mesh_forces
 from ._results import add_displacement_harmonics, mesh_coordinates, sweep_dataset
 from ._stability import bifurcation_kind, stability
-from ._time_domain import hb_initial_state
 from ._toml_io import dumps_train
 from ._train import Train
 
@@ -615,7 +614,7 @@ def _solve_points(problem, omegas):
     linear guess: one factorisation each without backlash (``_hb.solve_linear``), Newton
     with backlash. One point after the other (``lax.map``): vmapped, Newton's batch of
     dense factorisations ran 1.3x slower at K = 64 (1.04x at K = 32) on 2 cores."""
-    if _has_backlash(problem):
+    if problem.system.has_backlash:
         return _newton_points(problem, omegas)
     return _linear_points(problem, omegas)
 
@@ -643,7 +642,7 @@ def _enter_segment(problem, param, previous, lam, omega_ref, guess=None):
             sol = _newton_jit(problem, jnp.asarray(lam * omega_ref), y)
             if int(sol.result) == _hb.CONVERGED:
                 return sol.y, _hb.CONVERGED
-            state = hb_initial_state(y.reshape(problem.shape) * problem.x_scale,
+            state = _time_domain.hb_initial_state(y.reshape(problem.shape) * problem.x_scale,
                                      lam * omega_ref, problem.settings.eta)
         return start_point(problem, lam * omega_ref, state)
     K_old, y_old, lam_old = previous
@@ -656,7 +655,7 @@ def start_point(problem, omega, state=None):
     """``(y, result code)`` at ``omega``: Newton from the linear, in-contact guess; with
     backlash, when that fails, :func:`backlash_start`. With a ``state`` ``(x0, v0)``
     (where a branch left off) the time integration starts from it, and before Newton."""
-    backlash = _has_backlash(problem)
+    backlash = problem.system.has_backlash
     if state is not None and backlash:
         sol = settled_start(problem, omega, state)
         if int(sol.result) == _hb.CONVERGED:
@@ -680,10 +679,6 @@ def backlash_start(problem, omega) -> _hb.HBSolution:
     if int(sol.result) == _hb.CONVERGED:
         return sol
     return _backlash_homotopy(problem, omega)
-
-
-def _has_backlash(problem) -> bool:
-    return bool(jnp.any(problem.system.backlash > 0))
 
 
 SETTLE_PERIODS = 40

@@ -83,6 +83,11 @@ class System(eqx.Module):
         """Linear stiffness of the springs, ``S^T diag(k) S``."""
         return self.spring_rows.T @ (self.spring_stiffness[:, None] * self.spring_rows)
 
+    @property
+    def has_backlash(self) -> bool:
+        """Some mesh has a clearance (concrete values only: not under ``jit``)."""
+        return bool(np.any(np.asarray(self.backlash) > 0))
+
     def mean_stiffness(self) -> Float[Array, "n n"]:
         """``K + W^T diag(kbar) W``: the linear, mean-stiffness, no-backlash stiffness."""
         return self.K + self.W.T @ (self.kbar[:, None] * self.W)
