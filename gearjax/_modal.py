@@ -89,42 +89,50 @@ class ModalResult:
         return out
 
 
+def mode_classes(system: System):
+    """Classes of the modes of the mean-stiffness model, as :func:`modes` gives them
+    (jittable and vmappable over the system's arrays, used by the Floquet verdict).
+
+    **Returns** ``(lam, V, shares, rigid, penalty)``: eigenvalues ``(n,)`` (rad^2/s^2,
+    ascending), M-normalised shapes ``(n, n)`` (columns), strain-energy shares
+    ``{"elastic" | "penalty" | "rigid" | "mesh": (n,)}``, and ``(n,)`` booleans for the
+    near-rigid-body and penalty modes (the rest are elastic). An exact rigid-body mode
+    (housing.free = 0 and the brakes leave the train free to turn) has eigenvalue zero up
+    to round-off; its strain-energy shares are round-off too (mostly ``"mesh"``), so it
+    is classed rigid by its eigenvalue.
+    """
+    lam, V = _generalized_eigh(system.mean_stiffness(), system.M)
+    classes = np.asarray(system.spring_class, dtype=object)
+    spring_energy = 0.5 * system.spring_stiffness[:, None] * (system.spring_rows @ V) ** 2
+    energy = {c: jnp.sum(spring_energy[classes == c], axis=0) if np.any(classes == c)
+              else jnp.zeros(lam.shape) for c in ("elastic", "penalty", "rigid")}
+    energy["mesh"] = jnp.sum(0.5 * system.kbar[:, None] * (system.W @ V) ** 2, axis=0)
+    total = sum(energy.values())
+    safe = jnp.where(total > 0, total, 1.0)
+    shares = {c: jnp.where(total > 0, e / safe, 0.0) for c, e in energy.items()}
+    zero = lam <= lam.size * jnp.finfo(lam.dtype).eps * jnp.max(jnp.abs(lam))
+    rigid = (total <= 0) | zero | (shares["rigid"] > 0.5)
+    penalty = ~rigid & (shares["penalty"] > 0.5)
+    return lam, V, shares, rigid, penalty
+
+
 def modes(system: System) -> ModalResult:
     """Natural frequencies (Hz), shapes, multiplicities, classes and families."""
-    lam, V = (np.asarray(a) for a in _generalized_eigh(system.mean_stiffness(), system.M))
+    lam, V, shares, rigid, penalty = (jax.tree.map(np.asarray, a)
+                                      for a in mode_classes(system))
     hz = np.sqrt(np.clip(lam, 0.0, None)) / (2 * np.pi)
-    S = np.asarray(system.spring_rows)
-    ks = np.asarray(system.spring_stiffness)
-    W = np.asarray(system.W)
-    kbar = np.asarray(system.kbar)
-    spring_energy = 0.5 * ks[:, None] * (S @ V) ** 2  # (s, n)
-    mesh_energy = 0.5 * kbar[:, None] * (W @ V) ** 2  # (m, n)
-    classes = np.asarray(system.spring_class)
     groups = _repeated_groups(hz)
-    # an exact rigid-body mode (housing.free = 0 and the brakes leave the train free to turn)
-    # has eigenvalue zero up to round-off; its strain-energy shares are round-off too (mostly
-    # "mesh"), so it is classed rigid by its eigenvalue
-    zero = lam <= lam.size * np.finfo(lam.dtype).eps * np.max(np.abs(lam))
     out = []
     for k in range(len(hz)):
-        shares = {c: float(spring_energy[classes == c, k].sum()) for c in ("elastic", "penalty",
-                                                                           "rigid")}
-        shares["mesh"] = float(mesh_energy[:, k].sum())
-        total = sum(shares.values())
-        shares = {c: (e / total if total > 0 else 0.0) for c, e in shares.items()}
-        if total <= 0 or zero[k] or shares["rigid"] > 0.5:
-            cls = "rigid"
-        elif shares["penalty"] > 0.5:
-            cls = "penalty"
-        else:
-            cls = "elastic"
+        cls = "rigid" if rigid[k] else "penalty" if penalty[k] else "elastic"
         v = V[:, k]
         big = np.argmax(np.abs(v))
         v = v / v[big]
         family, stage = _family(system, v)
         out.append(Mode(hz=float(hz[k]), multiplicity=groups[k], cls=cls, family=family,
                         stage=stage, shape=dict(zip(system.dof_labels, np.where(
-                            np.abs(v) < 1e-12, 0.0, v).tolist())), energy=shares))
+                            np.abs(v) < 1e-12, 0.0, v).tolist())),
+                        energy={c: float(e[k]) for c, e in shares.items()}))
     return ModalResult(modes=tuple(out))
 
 
