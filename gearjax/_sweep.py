@@ -774,8 +774,9 @@ def bifurcations(f_hz, stable, multipliers, excluded, branch=None) -> list[dict]
     of the two points).
 
     ``kind`` is from :func:`~gearjax._stability.bifurcation_kind`: ``fold``,
-    ``period_doubling`` or ``neimark_sacker`` (``None`` where no multiplier left the unit
-    circle, e.g. a change in the excluded rigid-body set).
+    ``period_doubling`` or ``neimark_sacker`` (``None`` where no retained multiplier
+    changed side of the unit circle; the rigid-body multipliers are left out, see
+    :class:`~gearjax._stability.Stability`).
     """
     out = []
     change = np.asarray(stable[1:]) != np.asarray(stable[:-1])
