@@ -546,8 +546,7 @@ def stability(problem: HBProblem, X: Array, omega, tol=1e-6, n_steps: int | None
     excluded = rank < 2 * jnp.sum(rigid)
     max_abs = jnp.max(jnp.where(excluded, 0.0, jnp.abs(mu)))
     return Stability(multipliers=mu, mesh_strain=ratio, rigid_share=share, excluded=excluded,
-                     max_abs=max_abs,
-                     stable=max_abs < 1.0 + tol)
+                     max_abs=max_abs, stable=max_abs < 1.0 + tol)
 
 
 def bifurcation_kind(mult_before, mult_after, tol: float = 1e-6) -> str | None:
