@@ -643,7 +643,7 @@ def _enter_segment(problem, param, previous, lam, omega_ref, guess=None):
             if int(sol.result) == _hb.CONVERGED:
                 return sol.y, _hb.CONVERGED
             state = _time_domain.hb_initial_state(y.reshape(problem.shape) * problem.x_scale,
-                                     lam * omega_ref, problem.settings.eta)
+                                                  lam * omega_ref, problem.settings.eta)
         return start_point(problem, lam * omega_ref, state)
     K_old, y_old, lam_old = previous
     sol = _newton_jit(problem, jnp.asarray(lam_old * omega_ref),
