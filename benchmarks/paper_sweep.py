@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import gearjax as gj
-from gearjax import _hb
+from gearjax import _bordered, _hb
 from gearjax._assembly import assemble
 from gearjax._plot import plot_sweep
 from gearjax._stability import stability
@@ -50,28 +50,38 @@ def _best_of(fn, *args, repeat: int = 5) -> float:
 
 
 def breakdown(train, result) -> None:
-    """Cost of one residual, one structured Jacobian, one LU factorisation + solve and one
-    Floquet stability evaluation per segment's K, at a point of the sweep (ms)."""
+    """Cost per segment's K, at a point of the sweep (ms, compile excluded): one residual,
+    one structured Jacobian, one bordered factorisation + solve of the continuation, done
+    dense (the Jacobian, its LU) and condensed to the motions that deflect a mesh (what
+    the continuation does, ``gearjax._bordered``), and one Floquet stability evaluation."""
     ds = result.dataset
     system = assemble(train, "first")
     if bool(json.loads(ds.attrs["solver"])["linear"]):
         system = dataclasses.replace(system, backlash=jnp.zeros_like(system.backlash))
-    print(f"{'K':>4} {'unknowns':>9} {'residual':>9} {'jacobian':>9} {'LU+solve':>9} "
-          f"{'stability':>10}  (ms, one evaluation, compile excluded)")
+    print(f"{'K':>4} {'unknowns':>9} {'condensed':>10} {'residual':>9} {'jacobian':>9} "
+          f"{'dense LU':>9} {'condensed':>10} {'ratio':>6} {'stability':>10}  (ms, one "
+          "evaluation; factor + solve of the bordered system, Jacobian included)")
     for f_a, f_b, K in result.segments:
         problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=K))
+        dense = dataclasses.replace(problem, mesh_rank=None)
         i = int(np.argmin(np.abs(ds["mesh_frequency_hz"].values - (f_a + f_b) / 2)))
         omega = jnp.asarray(float(ds["omega"].values[i]))
         y = _hb.linear_guess(problem, omega)
+        g = _hb.omega_derivative(problem, y, omega)
+        t = jnp.ones(problem.size + 1) / np.sqrt(problem.size + 1)
         res = jax.jit(_hb.residual)
         jac = jax.jit(_hb.jacobian)
-        J = jac(problem, y, omega)
-        lu = jax.jit(lambda A, b: jax.scipy.linalg.lu_solve(jax.scipy.linalg.lu_factor(A), b))
+        bordered = jax.jit(lambda p, y, w, g, t: _bordered.solve(
+            _bordered.factor(p, y, w, g, t[:-1], t[-1]), t))
         X = y.reshape(problem.shape) * problem.x_scale
         stab = jax.jit(stability)
-        print(f"{K:>4} {problem.size:>9} {1e3 * _best_of(res, problem, y, omega):>9.2f} "
-              f"{1e3 * _best_of(jac, problem, y, omega):>9.2f} "
-              f"{1e3 * _best_of(lu, J, y):>9.2f} "
+        reduced = (problem.mesh_rank or problem.shape[1]) * problem.shape[0]
+        t_dense = _best_of(bordered, dense, y, omega, g, t)
+        t_cond = _best_of(bordered, problem, y, omega, g, t)
+        print(f"{K:>4} {problem.size:>9} {reduced:>10} "
+              f"{1e3 * _best_of(res, problem, y, omega):>9.2f} "
+              f"{1e3 * _best_of(jac, problem, y, omega):>9.2f} {1e3 * t_dense:>9.2f} "
+              f"{1e3 * t_cond:>10.2f} {t_dense / t_cond:>6.2f} "
               f"{1e3 * _best_of(stab, problem, X, omega, repeat=2):>10.2f}")
 
 

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from . import _hb
+from . import _bordered, _hb
 
 STOP_REASONS = ("reached_end", "max_points", "step_too_small", "nonfinite", "closed_loop")
 REACHED_END, MAX_POINTS, STEP_TOO_SMALL, STOP_NONFINITE = range(4)
@@ -51,6 +51,18 @@ class AbstractParameter(eqx.Module):
 
     def d_lambda(self, y, lam):
         return jax.jvp(lambda l: self.residual(y, l), (lam,), (jnp.ones_like(lam),))[1]
+
+    def factor(self, y, lam, ty, tlam) -> _bordered.Factors:
+        """Factors of the bordered Jacobian ``[[dG/dy, dG/dlambda], [ty^T, tlam]]``:
+        condensed to the motions that deflect a mesh where the problem's ``mesh_rank``
+        allows (``_bordered.factor``, from the harmonic-balance Jacobian), else dense
+        from :meth:`jacobian`. A subclass that replaces the residual of such a problem
+        replaces this too."""
+        problem, omega = self.split(lam)
+        g = self.d_lambda(y, lam)
+        if problem.mesh_rank is None:
+            return _bordered.dense(self.jacobian(y, lam), g, ty, tlam)
+        return _bordered.factor(problem, y, omega, g, ty, tlam)
 
     def omega(self, lam):
         return self.split(lam)[1]
@@ -113,8 +125,8 @@ class ArcState(eqx.Module):
     (``tlam`` = d lambda / ds); ``h``: next step; ``accepted``: the attempt
     succeeded; ``fold``: the accepted step crossed a fold (``tlam`` changed sign);
     ``fold_lam``: its located parameter value; ``steps``: corrector iterations;
-    ``lu``, ``piv``: LU factors of the bordered Jacobian at the current point, reused
-    by the next corrector (chord Newton: one factorisation per point).
+    ``factors``: of the bordered Jacobian at the current point (``_bordered.Factors``),
+    reused by the next corrector (chord Newton: one factorisation per point).
     """
 
     y: Array
@@ -126,8 +138,7 @@ class ArcState(eqx.Module):
     fold: Array
     fold_lam: Array
     steps: Array
-    lu: Array
-    piv: Array
+    factors: _bordered.Factors
 
 
 class _Corrector(eqx.Module):
@@ -145,37 +156,29 @@ class _Corrector(eqx.Module):
     prev: Array
 
 
-def _bordered(param: AbstractParameter, y, lam, ty, tlam):
-    J = param.jacobian(y, lam)
-    g = param.d_lambda(y, lam)
-    top = jnp.concatenate([J, g[:, None]], axis=1)
-    bottom = jnp.concatenate([ty, tlam[None]])[None, :]
-    return jnp.concatenate([top, bottom], axis=0)
-
-
-def _tangent_lu(param: AbstractParameter, y, lam, ty, tlam):
+def tangent_factors(param: AbstractParameter, y, lam, ty, tlam):
     """Factorise the bordered Jacobian at ``(y, lam)`` (last row the previous tangent) and
-    return the new unit tangent with the factors."""
-    lu, piv = jax.scipy.linalg.lu_factor(_bordered(param, y, lam, ty, tlam))
-    t = jax.scipy.linalg.lu_solve((lu, piv), jnp.zeros(y.shape[0] + 1).at[-1].set(1.0))
+    return the new unit tangent ``(ty, tlam)`` with the factors."""
+    factors = param.factor(y, lam, ty, tlam)
+    t = _bordered.solve(factors, jnp.zeros(y.shape[0] + 1).at[-1].set(1.0))
     t = t / jnp.linalg.norm(t)
-    return t[:-1], t[-1], lu, piv
+    return t[:-1], t[-1], factors
 
 
 def tangent(param: AbstractParameter, y, lam, ty, tlam):
     """Unit tangent at ``(y, lam)`` oriented along the previous tangent ``(ty, tlam)``."""
-    return _tangent_lu(param, y, lam, ty, tlam)[:2]
+    return tangent_factors(param, y, lam, ty, tlam)[:2]
 
 
 def start(param: AbstractParameter, y, lam, direction, settings: Settings) -> ArcState:
     """State at a converged point, tangent pointing to increasing ``lam`` if ``direction > 0``."""
     lam = jnp.asarray(lam, float)
     ty, tlam = tangent(param, y, lam, jnp.zeros_like(y), jnp.sign(direction) * 1.0)
-    ty, tlam, lu, piv = _tangent_lu(param, y, lam, ty, tlam)
+    ty, tlam, factors = tangent_factors(param, y, lam, ty, tlam)
     return ArcState(y=y, lam=lam, ty=ty, tlam=tlam,
                     h=jnp.asarray(settings.step, float), accepted=jnp.asarray(True),
-                    fold=jnp.asarray(False), fold_lam=jnp.asarray(jnp.nan),
-                    steps=jnp.asarray(0), lu=lu, piv=piv)
+                    fold=jnp.asarray(False), fold_lam=jnp.asarray(jnp.nan, float),
+                    steps=jnp.asarray(0), factors=factors)
 
 
 def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings) -> ArcState:
@@ -191,20 +194,20 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
     caller stops below ``min_step``).
 
     The two phases are separate loops, so the chord loop reads the factors in place
-    (no copy of the ``(N+1)^2`` matrix per iteration). The returned ``lu``, ``piv`` are
+    (no copy of the factorised matrix per iteration). The returned ``factors`` are
     those of the new point whenever the corrector converged, also for an attempt that
     is not accepted (a fold crossed with a long step): :func:`keep_factors` puts the
-    state's back there (a select over the factors is itself a pass over ``(N+1)^2``
-    numbers, which the Python driver does without).
+    state's back there (a select over the factors is itself a pass over the matrix,
+    which the Python driver does without).
     """
     h = jnp.minimum(state.h, settings.max_dlambda / jnp.maximum(jnp.abs(state.tlam), 1e-12))
     y_p = state.y + h * state.ty
     lam_p = state.lam + h * state.tlam
 
-    def iterate(c, lu, piv, full):
+    def iterate(c, factors, full):
         r = param.residual(c.y, c.lam)
         arc = state.ty @ (c.y - y_p) + state.tlam * (c.lam - lam_p)
-        d = jax.scipy.linalg.lu_solve((lu, piv), -jnp.concatenate([r, arc[None]]))
+        d = _bordered.solve(factors, -jnp.concatenate([r, arc[None]]))
         size = jnp.max(jnp.abs(d))
         finite = jnp.all(jnp.isfinite(d))
         small = size <= settings.rtol * jnp.maximum(1.0, jnp.max(jnp.abs(c.y)))
@@ -224,11 +227,10 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
                           converged=ok, prev=jnp.where(c.i == 0, jnp.inf, size))
 
     def chord(c):
-        return iterate(c, state.lu, state.piv, False)
+        return iterate(c, state.factors, False)
 
     def newton(c):
-        lu, piv = jax.scipy.linalg.lu_factor(_bordered(param, c.y, c.lam, state.ty, state.tlam))
-        return iterate(c, lu, piv, True)
+        return iterate(c, param.factor(c.y, c.lam, state.ty, state.tlam), True)
 
     not_done = lambda c: ~c.done  # noqa: E731
     init = _Corrector(y=y_p, lam=lam_p, k=jnp.asarray(0), i=jnp.asarray(0),
@@ -242,12 +244,12 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
     y, lam, k, converged = c.y, c.lam, c.k, c.converged
 
     def new_tangent(_):
-        return _tangent_lu(param, y, lam, state.ty, state.tlam)
+        return tangent_factors(param, y, lam, state.ty, state.tlam)
 
     def old_tangent(_):
-        return state.ty, state.tlam, state.lu, state.piv
+        return state.ty, state.tlam, state.factors
 
-    ty, tlam, lu, piv = jax.lax.cond(converged, new_tangent, old_tangent, None)
+    ty, tlam, factors = jax.lax.cond(converged, new_tangent, old_tangent, None)
     crossed = converged & (jnp.sign(tlam) != jnp.sign(state.tlam))
     # a fold crossed with a long step is approached again with shorter ones, so that
     # the interpolated fold location below is accurate
@@ -274,15 +276,14 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
         fold=fold,
         fold_lam=fold_lam,
         steps=k,
-        lu=lu,
-        piv=piv,
+        factors=factors,
     )
 
 
 def keep_factors(old: ArcState, new: ArcState) -> ArcState:
     """``new`` with ``old``'s factors where the attempt was not accepted (jittable)."""
-    return _replace(new, lu=jnp.where(new.accepted, new.lu, old.lu),
-                             piv=jnp.where(new.accepted, new.piv, old.piv))
+    return _replace(new, factors=jax.tree.map(lambda a, b: jnp.where(new.accepted, a, b),
+                                              new.factors, old.factors))
 
 
 def _replace(module, **fields):
@@ -398,7 +399,7 @@ def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Setti
     while len(rows) < max_points:
         new = step(param, state, settings)
         # a rejected attempt keeps the factors of the point it started from
-        state = new if bool(new.accepted) else _replace(new, lu=state.lu, piv=state.piv)
+        state = new if bool(new.accepted) else _replace(new, factors=state.factors)
         if not bool(jnp.all(jnp.isfinite(state.y))):
             stop = "nonfinite"
             break

@@ -88,7 +88,9 @@ class HBProblem(eqx.Module):
     **Fields:** ``kappa`` ``(m, T)``: dimensionless stiffness at the sample phases;
     ``te``, ``te_rate`` ``(m, T)``: transmission error (m) and its derivative with
     respect to phase (m/rad); ``forcing`` ``(2K+1, n)``: external torque coefficients;
-    ``x_scale`` ``(n,)``: unknown scale; ``length``: characteristic mesh length (m).
+    ``x_scale`` ``(n,)``: unknown scale; ``length``: characteristic mesh length (m);
+    ``mesh_rank`` (static): ``rank W`` where below ``n`` (the bordered solves of
+    continuation condense the rest, ``gearjax._bordered``), else ``None``.
     """
 
     system: System
@@ -100,6 +102,7 @@ class HBProblem(eqx.Module):
     forcing: Float[Array, "C n"]
     x_scale: Float[Array, " n"]
     length: Float[Array, ""]
+    mesh_rank: int | None = eqx.field(static=True, default=None)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -143,7 +146,19 @@ def hb_problem(system: System, settings: HarmonicBalance = HarmonicBalance()) ->
     lever = jnp.max(jnp.abs(system.W), axis=0) if system.n_meshes else jnp.ones(system.n_dof)
     x_scale = length / jnp.where(lever > 0, lever, 1.0)
     return HBProblem(system=system, settings=settings, n_time=T, kappa=kappa, te=te,
-                     te_rate=te_rate, forcing=forcing, x_scale=x_scale, length=length)
+                     te_rate=te_rate, forcing=forcing, x_scale=x_scale, length=length,
+                     mesh_rank=mesh_rank(system.W))
+
+
+def mesh_rank(W) -> int | None:
+    """``rank W`` ``(m, n)`` when it is below ``n`` (some motions deflect no mesh), else
+    ``None``; ``None`` too for a traced ``W`` (the rank is a static shape)."""
+    try:
+        W = np.asarray(W, float)
+    except jax.errors.TracerArrayConversionError:
+        return None
+    r = int(np.linalg.matrix_rank(W)) if W.size else 0
+    return r if 0 < r < W.shape[1] else None
 
 
 # ------------------------------------------------------------------------- residual

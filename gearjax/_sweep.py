@@ -547,11 +547,11 @@ def _arc_state(param, y, lam, ty, tlam, h, ty_before, tlam_before):
     and next step ``h``: as ``arclength_step`` leaves it, with the bordered Jacobian
     factorised with the tangent of the point before in its last row (the chord corrector
     of the next step reuses those factors)."""
-    _, _, lu, piv = _continuation._tangent_lu(param, y, lam, ty_before, tlam_before)
+    factors = _continuation.tangent_factors(param, y, lam, ty_before, tlam_before)[2]
     return _continuation.ArcState(
         y=y, lam=lam, ty=ty, tlam=tlam, h=h, accepted=jnp.asarray(True),
-        fold=jnp.asarray(False), fold_lam=jnp.asarray(jnp.nan), steps=jnp.asarray(0),
-        lu=lu, piv=piv)
+        fold=jnp.asarray(False), fold_lam=jnp.asarray(jnp.nan, float), steps=jnp.asarray(0),
+        factors=factors)
 
 
 def _check_unloaded(train, g, kin, system):

@@ -1,0 +1,66 @@
+"""Condensed bordered solves (``_bordered``) against the dense bordered system."""
+
+import dataclasses
+import math
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gearjax as gj
+from gearjax import _bordered, _hb
+
+
+@pytest.fixture(scope="module")
+def paper():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gj.GeometryWarning)
+        return gj.assemble(gj.load_train())
+
+
+def test_mesh_rank(paper):
+    # two planetary stages of 7 degrees of freedom; two motions per stage deflect no mesh
+    assert paper.n_dof == 14
+    assert _hb.hb_problem(paper, _hb.HarmonicBalance(n_harmonics=4)).mesh_rank == 10
+    one = gj.system_from_matrices([[1.0]], [[0.1]], [[0.0]], [[1.0]], [1.0], backlash=[1.0])
+    assert _hb.mesh_rank(one.W) is None  # every motion deflects the mesh: nothing to condense
+    # a traced W has no static rank: dense
+    assert int(jax.jit(lambda W: jnp.asarray(_hb.mesh_rank(W) is None))(paper.W)) == 1
+
+
+def test_condensed_solve_equals_dense(paper, K=6, eta=2):
+    """At a state where teeth separate over part of the period (the mesh blocks then
+    vary in time), the condensed factorisation solves the bordered system as the dense
+    LU does, to round-off."""
+    problem = _hb.hb_problem(paper, _hb.HarmonicBalance(n_harmonics=K, eta=eta))
+    omega = 2 * math.pi * 3000.0 / 7 * eta
+    Y = _hb.linear_guess(problem, omega).reshape(problem.shape)
+    deflection = lambda Y: _hb.mesh_samples(  # noqa: E731
+        problem, (Y * problem.x_scale) @ paper.W.T, omega)[0]
+    rng = np.random.default_rng(1)
+    mean = np.max(np.abs(np.asarray(deflection(Y))))
+    Y = Y.at[1:].set(rng.normal(size=Y[1:].shape))  # a vibration that opens the clearance
+    osc = np.max(np.abs(np.asarray(deflection(Y.at[0].set(0.0)))))
+    Y = Y.at[1:].multiply(1.5 * mean / osc)
+    y, p = Y.reshape(-1), deflection(Y)
+    separated = np.mean(np.abs(np.asarray(p)) < np.asarray(paper.backlash)[:, None])
+    assert 0.01 < separated < 0.99
+    N = problem.size
+    g, ty = jnp.asarray(rng.normal(size=N)), jnp.asarray(rng.normal(size=N))
+    tlam, rhs = 0.3, jnp.asarray(rng.normal(size=N + 1))
+    dense = dataclasses.replace(problem, mesh_rank=None)
+
+    @jax.jit
+    def solves(y):
+        B = jnp.block([[_hb.jacobian(problem, y, omega), g[:, None]],
+                       [ty[None, :], jnp.asarray([[tlam]])]])
+        x = [_bordered.solve(_bordered.factor(p, y, omega, g, ty, tlam), rhs)
+             for p in (problem, dense)]
+        return x[0], x[1], B @ x[0] - rhs
+
+    x_cond, x_dense, error = solves(y)
+    assert float(jnp.max(jnp.abs(x_cond - x_dense))) < 1e-10 * float(jnp.max(jnp.abs(x_dense)))
+    assert float(jnp.max(jnp.abs(error))) < 1e-8
+
