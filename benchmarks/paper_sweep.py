@@ -50,7 +50,7 @@ def _best_of(fn, *args, repeat: int = 5) -> float:
 
 
 def breakdown(train, result) -> None:
-    """Cost per segment's K, at a point of the sweep (ms, compile excluded): one residual,
+    """Cost per K, at a point of its first segment (ms, compile excluded): one residual,
     one structured Jacobian, one bordered factorisation + solve of the continuation, done
     dense (the Jacobian, its LU) and condensed to the motions that deflect a mesh (what
     the continuation does, ``gearjax._bordered``), and one Floquet stability evaluation."""
@@ -61,9 +61,12 @@ def breakdown(train, result) -> None:
     print(f"{'K':>4} {'unknowns':>9} {'condensed':>10} {'residual':>9} {'jacobian':>9} "
           f"{'dense LU':>9} {'condensed':>10} {'ratio':>6} {'stability':>10}  (ms, one "
           "evaluation; factor + solve of the bordered system, Jacobian included)")
+    first = {}  # the first segment of each K
     for f_a, f_b, K in result.segments:
+        first.setdefault(K, (f_a, f_b))
+    for K, (f_a, f_b) in first.items():
         problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=K))
-        dense = dataclasses.replace(problem, mesh_rank=None)
+        dense = dataclasses.replace(problem, mesh_null=None)
         i = int(np.argmin(np.abs(ds["mesh_frequency_hz"].values - (f_a + f_b) / 2)))
         omega = jnp.asarray(float(ds["omega"].values[i]))
         y = _hb.linear_guess(problem, omega)
@@ -75,7 +78,8 @@ def breakdown(train, result) -> None:
             _bordered.factor(p, y, w, g, t[:-1], t[-1]), t))
         X = y.reshape(problem.shape) * problem.x_scale
         stab = jax.jit(stability)
-        reduced = (problem.mesh_rank or problem.shape[1]) * problem.shape[0]
+        nv = 0 if problem.mesh_null is None else problem.mesh_null.shape[1]
+        reduced = (problem.shape[1] - nv) * problem.shape[0]
         t_dense = _best_of(bordered, dense, y, omega, g, t)
         t_cond = _best_of(bordered, problem, y, omega, g, t)
         print(f"{K:>4} {problem.size:>9} {reduced:>10} "

@@ -17,7 +17,8 @@ couples ``u`` with ``u`` only. So ``v`` is eliminated pair by pair (blocks of
 ``2(n - r)`` unknowns) and the dense factorisation is of ``(2K+1) r + 1`` unknowns
 instead of ``(2K+1) n + 1``: ``(r/n)^3`` of the floating-point work, 0.36 on the
 paper's gear (two stages of four planets, ``r = 10`` of ``n = 14``). The solution
-is the same as the dense one up to round-off (tests/test_bordered.py).
+is the same as the dense one up to round-off (tests/test_bordered.py). Newton at a
+fixed frequency uses the same factors with a trivial border (:func:`jacobian_factors`).
 
 Both bases are orthonormal in the scaled unknowns and scaled equations (per harmonic:
 the residual scale depends on the harmonic number), so the condensed matrix is as well
@@ -69,23 +70,24 @@ def factor(problem: _hb.HBProblem, y: Array, omega, g: Array, ty: Array, tlam) -
     **Arguments:** ``y`` ``(N,)`` scaled unknowns; ``omega`` base frequency (rad/s);
     ``g`` ``(N,)`` the bordering column; ``ty`` ``(N,)``, ``tlam`` the bordering row.
     """
-    r = problem.mesh_rank
-    if r is None:
+    null = problem.mesh_null  # (n, nv)
+    if null is None:
         return dense(_hb.jacobian(problem, y, omega), g, ty, tlam)
     s = problem.system
     C, n = problem.shape
     K = problem.settings.n_harmonics
-    nv = n - r
+    nv = null.shape[1]
+    r = n - nv
     w0 = omega / problem.settings.eta
     xs = problem.x_scale
     row_scale = _hb.residual_scale(problem, omega)  # (C, n), per harmonic number
     harmonic = np.asarray(_aft.harmonic_numbers(K))
     first = np.concatenate([[0], np.arange(1, C, 2)])  # one row per harmonic number
-    null = jnp.linalg.svd(s.W, full_matrices=True)[2][r:].T  # (n, nv): W null = 0
     # unknowns y deflect no mesh where x_scale * y is in the null space; equation rows
     # (divided by the row scale) see no mesh force where orthogonal to (row scale) null
-    R = _complete_basis(null / xs[:, None], nv)
-    P = jax.vmap(_complete_basis, in_axes=(0, None))(row_scale[first][:, :, None] * null, nv)
+    bases = _complete_bases(
+        jnp.concatenate([(null / xs[:, None])[None], row_scale[first][:, :, None] * null]))
+    R, P = bases[0], bases[1:]
 
     # linear part per harmonic number k: rows (cos k, sin k), d/dtau = k [[0, 1], [-1, 0]]
     k = jnp.arange(K + 1, dtype=float)
@@ -97,7 +99,7 @@ def factor(problem: _hb.HBProblem, y: Array, omega, g: Array, ty: Array, tlam) -
     Lk = Lk / row_scale[first][:, None, :, None, None] * xs  # scaled: (K+1, 2, n, 2, n)
     Lk = jnp.einsum("kip,kaibj,jq->kapbq", P, Lk, R)
     mean, pairs = Lk[:1, :1, :, :1, :], Lk[1:]
-    blocks = [_condense(grp, r) for grp in (mean, pairs)]  # (Lam, Vinv, E, F) per group
+    blocks = _condense((mean, pairs), r)  # (Lam, Vinv, E, F) per group
 
     # mesh part, in u only: W scaled and rotated on each side
     X = y.reshape(C, n) * xs
@@ -133,6 +135,18 @@ def dense(J: Array, g: Array, ty: Array, tlam) -> Factors:
     return Factors(lu=lu, piv=piv)
 
 
+def jacobian_factors(problem: _hb.HBProblem, y: Array, omega) -> Factors:
+    """Factors of the Jacobian alone, as the bordered matrix ``[[J, 0], [0, 1]]`` (Newton at
+    fixed frequency; :func:`jacobian_solve`)."""
+    zero = jnp.zeros_like(y)
+    return factor(problem, y, omega, zero, zero, 1.0)
+
+
+def jacobian_solve(factors: Factors, r: Array) -> Array:
+    """``J^-1 r`` ``(N,)`` from :func:`jacobian_factors`."""
+    return solve(factors, jnp.concatenate([r, jnp.zeros(1)]))[:-1]
+
+
 def solve(factors: Factors, rhs: Array) -> Array:
     """Solution ``(N + 1,)`` of the factorised bordered system for ``rhs`` ``(N + 1,)``
     (jittable)."""
@@ -157,30 +171,98 @@ def solve(factors: Factors, rhs: Array) -> Array:
 # ------------------------------------------------------------------------- parts
 
 
-def _complete_basis(null, nv: int) -> Array:
-    """Orthonormal ``(n, n)`` basis ``[u | v]``: ``v`` spans the columns of ``null``
-    ``(n, nv)``, ``u`` their orthogonal complement."""
-    Q = jnp.linalg.qr(null, mode="complete")[0]
-    return jnp.concatenate([Q[:, nv:], Q[:, :nv]], axis=1)
+def _complete_bases(A: Array) -> Array:
+    """Orthonormal bases ``(B, n, n)`` ``[u | v]``: ``v`` spans the columns of ``A[b]``
+    ``(n, nv)`` (full column rank), ``u`` their orthogonal complement.
 
-
-def _condense(L: Array, r: int):
-    """Schur complement of the ``v``-``v`` blocks of one group of rows.
-
-    ``L`` ``(G, g, n, g, n)``: linear blocks in the rotated bases (``g`` rows per group:
-    1 for the mean, 2 for a harmonic pair). **Returns:** ``(Lam, Vinv, E, F)``, ``Lam =
-    L_uu - L_uv Vinv L_vu`` ``(G, g r, g r)``, ``Vinv`` ``(G, g nv, g nv)``, ``E = Vinv
-    L_vu``, ``F = L_uv Vinv``.
+    Householder reflections in array operations (one loop body), not LAPACK (see
+    :func:`_inverses`).
     """
-    G, g, n = L.shape[:3]
-    u, v = slice(0, r), slice(r, n)
-    part = lambda a, b: L[:, :, a, :, b].reshape(G, g * (a.stop - a.start),  # noqa: E731
-                                                 g * (b.stop - b.start))
-    Luu, Luv, Lvu, Lvv = part(u, u), part(u, v), part(v, u), part(v, v)
-    Vinv = jnp.linalg.inv(Lvv)
-    E = Vinv @ Lvu
-    F = Luv @ Vinv
-    return Luu - Luv @ E, Vinv, E, F
+    B, n, nv = A.shape
+    rows = jnp.arange(n)
+
+    def reflect(j, c):
+        A, Q = c
+        x = jnp.where(rows >= j, jnp.take(A, j, axis=2), 0.0)  # (B, n)
+        head = jnp.take(x, j, axis=1)
+        v = x + jnp.where(rows == j, jnp.where(head >= 0, 1.0, -1.0)[:, None]
+                          * jnp.linalg.norm(x, axis=1, keepdims=True), 0.0)
+        v = v / jnp.linalg.norm(v, axis=1, keepdims=True)
+        A = A - 2 * v[:, :, None] * jnp.einsum("bi,bik->bk", v, A)[:, None, :]
+        Q = Q - 2 * jnp.einsum("bij,bj->bi", Q, v)[:, :, None] * v[:, None, :]
+        return A, Q
+
+    Q = jax.lax.fori_loop(0, nv, reflect, (A, jnp.broadcast_to(jnp.eye(n), (B, n, n))))[1]
+    return jnp.concatenate([Q[:, :, nv:], Q[:, :, :nv]], axis=2)
+
+
+def _inverses(A: Array) -> Array:
+    """Inverses ``(B, p, p)`` of a batch of small matrices: Gauss-Jordan elimination with
+    partial pivoting in array operations, equilibrated first; one loop body (unrolled,
+    every step would be separate compiled kernels: XLA's CPU code for them takes memory
+    mappings, a finite resource in a long session).
+
+    Not LAPACK: jaxlib's batched LAPACK kernels spread a batch over the XLA CPU thread
+    pool and wait for it, so two of them running at once on a 2-thread pool wait for
+    each other forever. Measured: Newton at K = 96 and 128 on the paper gear hung within
+    a few calls with a batched QR here next to the batched solve of ``_hb.linear_guess``
+    (XLA had hoisted the QR, which depends on ``omega`` only, out of the loop). The
+    factorisation keeps one LAPACK call (the LU of the condensed matrix), after every
+    other, as the dense one does.
+    """
+    B, p, _ = A.shape
+    # equilibrated first (powers of two: exact), for pivots that mean something
+    row = 2.0 ** -jnp.round(jnp.log2(jnp.max(jnp.abs(A), axis=2, keepdims=True)))
+    col = 2.0 ** -jnp.round(jnp.log2(jnp.max(jnp.abs(A * row), axis=1, keepdims=True)))
+    A = A * row * col
+    M = jnp.concatenate([A, jnp.broadcast_to(jnp.eye(p), A.shape)], axis=2)  # (B, p, 2p)
+    rows = jnp.arange(p)
+
+    def eliminate(j, M):
+        column = jnp.take(M, j, axis=2)  # (B, p)
+        pivot = jnp.argmax(jnp.where(rows >= j, jnp.abs(column), -1.0), axis=1)  # (B,)
+        swap = jnp.where(rows == j, pivot[:, None], jnp.where(rows == pivot[:, None], j, rows))
+        M = jnp.take_along_axis(M, swap[:, :, None], axis=1)
+        head = jnp.take(M, j, axis=1)  # (B, 2p)
+        head = head / jnp.take(head, j, axis=1)[:, None]
+        factor = jnp.where(rows == j, 0.0, jnp.take(M, j, axis=2))  # (B, p)
+        return jnp.where((rows == j)[None, :, None], head[:, None, :],
+                         M - factor[:, :, None] * head[:, None, :])
+
+    M = jax.lax.fori_loop(0, p, eliminate, M)
+    return jnp.swapaxes(col, 1, 2) * M[:, :, p:] * jnp.swapaxes(row, 1, 2)
+
+
+def _condense(groups, r: int):
+    """Schur complements of the ``v``-``v`` blocks of the groups of rows.
+
+    ``groups``: ``(mean, pairs)``, linear blocks in the rotated bases, ``(G, g, n, g, n)``
+    with ``g`` rows per group (1 for the mean, ``G = 1``; 2 for a harmonic pair, ``G = K``).
+    **Returns:** per group ``(Lam, Vinv, E, F)``: ``Lam = L_uu - L_uv Vinv L_vu``
+    ``(G, g r, g r)``, ``Vinv`` ``(G, g nv, g nv)`` the inverse of ``L_vv``, ``E = Vinv
+    L_vu``, ``F = L_uv Vinv``.
+
+    The inverses of both groups are one batch (the mean's block padded with an identity
+    to a pair's size), :func:`_inverses`.
+    """
+    parts = []
+    for L in groups:
+        G, g, n = L.shape[:3]
+        u, v = slice(0, r), slice(r, n)
+        part = lambda a, b: L[:, :, a, :, b].reshape(  # noqa: E731
+            G, g * (a.stop - a.start), g * (b.stop - b.start))
+        parts.append((part(u, u), part(u, v), part(v, u), part(v, v)))
+    (_, _, _, mean_vv), (_, _, _, pairs_vv) = parts
+    nv = mean_vv.shape[-1]
+    padded = jnp.zeros((1, 2 * nv, 2 * nv)).at[0, :nv, :nv].set(mean_vv[0]).at[
+        0, nv:, nv:].set(jnp.eye(nv))
+    inverse = _inverses(jnp.concatenate([padded, pairs_vv]))
+    out = []
+    for (Luu, Luv, Lvu, _), Vinv in zip(parts, (inverse[:1, :nv, :nv], inverse[1:])):
+        E = Vinv @ Lvu
+        F = Luv @ Vinv
+        out.append((Luu - Luv @ E, Vinv, E, F))
+    return out
 
 
 def _groups(Z: Array):

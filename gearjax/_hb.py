@@ -89,8 +89,10 @@ class HBProblem(eqx.Module):
     ``te``, ``te_rate`` ``(m, T)``: transmission error (m) and its derivative with
     respect to phase (m/rad); ``forcing`` ``(2K+1, n)``: external torque coefficients;
     ``x_scale`` ``(n,)``: unknown scale; ``length``: characteristic mesh length (m);
-    ``mesh_rank`` (static): ``rank W`` where below ``n`` (the bordered solves of
-    continuation condense the rest, ``gearjax._bordered``), else ``None``.
+    ``mesh_null`` ``(n, n - r)``: an orthonormal basis of the motions that deflect no
+    mesh (null space of ``W``, rank ``r``; the solves of Newton and continuation condense
+    them out, ``gearjax._bordered``), derived from ``system.W`` when the problem is built;
+    ``None`` where every motion deflects a mesh or ``W`` is traced (dense solves).
     """
 
     system: System
@@ -102,7 +104,7 @@ class HBProblem(eqx.Module):
     forcing: Float[Array, "C n"]
     x_scale: Float[Array, " n"]
     length: Float[Array, ""]
-    mesh_rank: int | None = eqx.field(static=True, default=None)
+    mesh_null: Float[Array, "n nv"] | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -147,18 +149,23 @@ def hb_problem(system: System, settings: HarmonicBalance = HarmonicBalance()) ->
     x_scale = length / jnp.where(lever > 0, lever, 1.0)
     return HBProblem(system=system, settings=settings, n_time=T, kappa=kappa, te=te,
                      te_rate=te_rate, forcing=forcing, x_scale=x_scale, length=length,
-                     mesh_rank=mesh_rank(system.W))
+                     mesh_null=mesh_null_space(system.W))
 
 
-def mesh_rank(W) -> int | None:
-    """``rank W`` ``(m, n)`` when it is below ``n`` (some motions deflect no mesh), else
-    ``None``; ``None`` too for a traced ``W`` (the rank is a static shape)."""
+def mesh_null_space(W) -> Array | None:
+    """Orthonormal basis ``(n, n - r)`` of the null space of ``W`` ``(m, n)`` (rank ``r``):
+    the motions that deflect no mesh. ``None`` where there are none, and for a traced
+    ``W`` (its rank sets a shape, so it must be known when the problem is built)."""
     try:
         W = np.asarray(W, float)
     except jax.errors.TracerArrayConversionError:
         return None
+    if W.ndim != 2:  # a batch of systems
+        return None
     r = int(np.linalg.matrix_rank(W)) if W.size else 0
-    return r if 0 < r < W.shape[1] else None
+    if not 0 < r < W.shape[1]:
+        return None
+    return jnp.asarray(np.linalg.svd(W)[2][r:].T)
 
 
 # ------------------------------------------------------------------------- residual
@@ -324,10 +331,14 @@ def newton(problem: HBProblem, omega, y0: Array) -> HBSolution:
     Stops when the scaled step and residual are below ``rtol`` (converged), after
     ``max_steps`` (max_steps), or on a non-finite value, keeping the last finite
     iterate (nonfinite). Never returns NaN silently: the code says what happened.
+    Each step factorises the Jacobian condensed to the motions that deflect a mesh
+    (``_bordered.jacobian_factors``; dense where ``mesh_null`` is ``None``).
     """
+    from . import _bordered  # the condensed factorisation, built on this module
+
     omega = jnp.asarray(omega, dtype=float)
-    return _iterate(problem, omega, y0,
-                    lambda y, r: jnp.linalg.solve(jacobian(problem, y, omega), -r))
+    return _iterate(problem, omega, y0, lambda y, r: _bordered.jacobian_solve(
+        _bordered.jacobian_factors(problem, y, omega), -r))
 
 
 def solve_linear(problem: HBProblem, omega, y0: Array | None = None) -> HBSolution:
@@ -341,10 +352,12 @@ def solve_linear(problem: HBProblem, omega, y0: Array | None = None) -> HBSoluti
     result codes: one factorisation instead of :func:`newton`'s two. The caller
     guarantees zero backlash (with backlash this is a chord iteration from ``y0``).
     """
+    from . import _bordered  # the condensed factorisation, built on this module
+
     omega = jnp.asarray(omega, dtype=float)
     y0 = linear_guess(problem, omega) if y0 is None else y0
-    factors = jax.scipy.linalg.lu_factor(jacobian(problem, y0, omega))
-    return _iterate(problem, omega, y0, lambda y, r: jax.scipy.linalg.lu_solve(factors, -r))
+    factors = _bordered.jacobian_factors(problem, y0, omega)
+    return _iterate(problem, omega, y0, lambda y, r: _bordered.jacobian_solve(factors, -r))
 
 
 def _iterate(problem: HBProblem, omega, y0: Array, solve) -> HBSolution:

@@ -20,14 +20,30 @@ def paper():
         return gj.assemble(gj.load_train())
 
 
-def test_mesh_rank(paper):
+def test_mesh_null_space(paper):
     # two planetary stages of 7 degrees of freedom; two motions per stage deflect no mesh
     assert paper.n_dof == 14
-    assert _hb.hb_problem(paper, _hb.HarmonicBalance(n_harmonics=4)).mesh_rank == 10
+    null = _hb.hb_problem(paper, _hb.HarmonicBalance(n_harmonics=4)).mesh_null
+    assert null.shape == (14, 4)
+    np.testing.assert_allclose(paper.W @ null, 0.0, atol=1e-15)
+    np.testing.assert_allclose(null.T @ null, np.eye(4), atol=1e-12)
     one = gj.system_from_matrices([[1.0]], [[0.1]], [[0.0]], [[1.0]], [1.0], backlash=[1.0])
-    assert _hb.mesh_rank(one.W) is None  # every motion deflects the mesh: nothing to condense
+    assert _hb.mesh_null_space(one.W) is None  # every motion deflects the mesh: dense
     # a traced W has no static rank: dense
-    assert int(jax.jit(lambda W: jnp.asarray(_hb.mesh_rank(W) is None))(paper.W)) == 1
+    assert int(jax.jit(lambda W: jnp.asarray(_hb.mesh_null_space(W) is None))(paper.W)) == 1
+
+
+def test_small_bases_and_inverses():
+    """The array-operation Householder bases and Gauss-Jordan inverses (no LAPACK)."""
+    rng = np.random.default_rng(2)
+    A = rng.normal(size=(3, 7, 2))
+    Q = np.asarray(_bordered._complete_bases(jnp.asarray(A)))
+    np.testing.assert_allclose(np.swapaxes(Q, 1, 2) @ Q, np.broadcast_to(np.eye(7), Q.shape),
+                               atol=1e-14)
+    np.testing.assert_allclose(np.swapaxes(Q[:, :, :5], 1, 2) @ A, 0.0, atol=1e-14)  # u ⟂ A
+    B = rng.normal(size=(4, 6, 6)) * np.logspace(-6, 6, 6)  # columns of very different size
+    np.testing.assert_allclose(B @ np.asarray(_bordered._inverses(jnp.asarray(B))),
+                               np.broadcast_to(np.eye(6), B.shape), atol=1e-12)
 
 
 def test_condensed_solve_equals_dense(paper, K=6, eta=2):
@@ -50,7 +66,7 @@ def test_condensed_solve_equals_dense(paper, K=6, eta=2):
     N = problem.size
     g, ty = jnp.asarray(rng.normal(size=N)), jnp.asarray(rng.normal(size=N))
     tlam, rhs = 0.3, jnp.asarray(rng.normal(size=N + 1))
-    dense = dataclasses.replace(problem, mesh_rank=None)
+    dense = dataclasses.replace(problem, mesh_null=None)
 
     @jax.jit
     def solves(y):
