@@ -94,8 +94,8 @@ def factor(problem: _hb.HBProblem, y: Array, omega, g: Array, ty: Array, tlam) -
     d = jnp.asarray([[0.0, 1.0], [-1.0, 0.0]])
     i2 = jnp.eye(2)
     stiff = s.K[None] - (k * w0)[:, None, None] ** 2 * s.M[None]  # (K+1, n, n)
-    Lk = (i2[None, :, None, :, None] * stiff[:, None, :, None, :]
-          + (k * w0)[:, None, None, None, None] * d[None, :, None, :, None] * s.C[None, None, :, None, :])
+    damp = (k * w0)[:, None, None, None, None] * d[None, :, None, :, None] * s.C[:, None, :]
+    Lk = i2[None, :, None, :, None] * stiff[:, None, :, None, :] + damp
     Lk = Lk / row_scale[first][:, None, :, None, None] * xs  # scaled: (K+1, 2, n, 2, n)
     Lk = jnp.einsum("kip,kaibj,jq->kapbq", P, Lk, R)
     mean, pairs = Lk[:1, :1, :, :1, :], Lk[1:]
@@ -120,18 +120,14 @@ def factor(problem: _hb.HBProblem, y: Array, omega, g: Array, ty: Array, tlam) -
     col = _join([u - jnp.einsum("gij,gj->gi", b[3], v) for b, u, v in zip(blocks, gu, gv)], K)
     row = _join([u - jnp.einsum("gji,gj->gi", b[2], v) for b, u, v in zip(blocks, tu, tv)], K)
     corner = tlam - sum(jnp.sum(w * v) for w, v in zip(wv, gv))
-    top = jnp.concatenate([A, col.reshape(-1, 1)], axis=1)
-    bottom = jnp.concatenate([row.reshape(-1), jnp.asarray(corner)[None]])[None, :]
-    lu, piv = jax.scipy.linalg.lu_factor(jnp.concatenate([top, bottom], axis=0))
+    lu, piv = _bordered_lu(A, col.reshape(-1), row.reshape(-1), corner)
     return Factors(lu=lu, piv=piv, R=R, P=Pc, Vinv=tuple(b[1] for b in blocks),
                    E=tuple(b[2] for b in blocks), F=tuple(b[3] for b in blocks), hv=hv, wv=wv)
 
 
 def dense(J: Array, g: Array, ty: Array, tlam) -> Factors:
     """Factorise ``[[J, g], [ty^T, tlam]]`` as it is (``J`` ``(N, N)``; jittable)."""
-    top = jnp.concatenate([J, g[:, None]], axis=1)
-    bottom = jnp.concatenate([ty, jnp.asarray(tlam)[None]])[None, :]
-    lu, piv = jax.scipy.linalg.lu_factor(jnp.concatenate([top, bottom], axis=0))
+    lu, piv = _bordered_lu(J, g, ty, tlam)
     return Factors(lu=lu, piv=piv)
 
 
@@ -169,6 +165,13 @@ def solve(factors: Factors, rhs: Array) -> Array:
 
 
 # ------------------------------------------------------------------------- parts
+
+
+def _bordered_lu(A: Array, col: Array, row: Array, corner):
+    """LU factors of ``[[A, col], [row^T, corner]]``."""
+    top = jnp.concatenate([A, col[:, None]], axis=1)
+    bottom = jnp.concatenate([row, jnp.asarray(corner)[None]])[None, :]
+    return jax.scipy.linalg.lu_factor(jnp.concatenate([top, bottom], axis=0))
 
 
 def _complete_bases(A: Array) -> Array:

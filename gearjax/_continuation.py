@@ -54,10 +54,10 @@ class AbstractParameter(eqx.Module):
 
     def factor(self, y, lam, ty, tlam) -> _bordered.Factors:
         """Factors of the bordered Jacobian ``[[dG/dy, dG/dlambda], [ty^T, tlam]]``:
-        condensed to the motions that deflect a mesh where the problem has some that
-        deflect none (``mesh_null``) (``_bordered.factor``, from the harmonic-balance Jacobian), else dense
-        from :meth:`jacobian`. A subclass that replaces the residual of such a problem
-        replaces this too."""
+        condensed to the motions that deflect a mesh where some deflect none
+        (``problem.mesh_null``; ``_bordered.factor``, from the harmonic-balance
+        Jacobian), else dense from :meth:`jacobian`. A subclass that replaces the
+        residual of such a problem replaces this too."""
         problem, omega = self.split(lam)
         g = self.d_lambda(y, lam)
         if problem.mesh_null is None:
