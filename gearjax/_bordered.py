@@ -81,22 +81,17 @@ def factor(problem: _hb.HBProblem, y: Array, omega, g: Array, ty: Array, tlam) -
     w0 = omega / problem.settings.eta
     xs = problem.x_scale
     row_scale = _hb.residual_scale(problem, omega)  # (C, n), per harmonic number
-    harmonic = np.asarray(_aft.harmonic_numbers(K))
-    first = np.concatenate([[0], np.arange(1, C, 2)])  # one row per harmonic number
+    harmonic = _aft.harmonic_numbers(K)
+    scale_k = row_scale[np.concatenate([[0], np.arange(1, C, 2)])]  # (K+1, n): per k
     # unknowns y deflect no mesh where x_scale * y is in the null space; equation rows
     # (divided by the row scale) see no mesh force where orthogonal to (row scale) null
     bases = _complete_bases(
-        jnp.concatenate([(null / xs[:, None])[None], row_scale[first][:, :, None] * null]))
+        jnp.concatenate([(null / xs[:, None])[None], scale_k[:, :, None] * null]))
     R, P = bases[0], bases[1:]
 
-    # linear part per harmonic number k: rows (cos k, sin k), d/dtau = k [[0, 1], [-1, 0]]
-    k = jnp.arange(K + 1, dtype=float)
-    d = jnp.asarray([[0.0, 1.0], [-1.0, 0.0]])
-    i2 = jnp.eye(2)
-    stiff = s.K[None] - (k * w0)[:, None, None] ** 2 * s.M[None]  # (K+1, n, n)
-    damp = (k * w0)[:, None, None, None, None] * d[None, :, None, :, None] * s.C[:, None, :]
-    Lk = i2[None, :, None, :, None] * stiff[:, None, :, None, :] + damp
-    Lk = Lk / row_scale[first][:, None, :, None, None] * xs  # scaled: (K+1, 2, n, 2, n)
+    # linear part per harmonic number k, scaled: (K+1, 2, n, 2, n), rows (cos k, sin k)
+    Lk = _hb.harmonic_blocks(s.K, s.M, s.C, w0, np.arange(K + 1))
+    Lk = Lk / scale_k[:, None, :, None, None] * xs
     Lk = jnp.einsum("kip,kaibj,jq->kapbq", P, Lk, R)
     mean, pairs = Lk[:1, :1, :, :1, :], Lk[1:]
     blocks = _condense((mean, pairs), r)  # (Lam, Vinv, E, F) per group

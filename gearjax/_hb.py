@@ -311,18 +311,25 @@ def linear_guess(problem: HBProblem, omega) -> Array:
     Kt = s.mean_stiffness()
     Ct = s.C + s.W.T @ (s.damping[:, None] * s.W)
     F = problem.forcing.at[0].add(preload)
-    # time-invariant: one (2n, 2n) system per harmonic, rows (cos k, sin k), d/dtau of
-    # (cos, sin) coefficients being k [[0, 1], [-1, 0]] (``_aft.derivative_matrix``)
-    k = jnp.arange(1, K + 1, dtype=float)[:, None, None, None, None]  # (K, a, i, b, j)
-    d = jnp.asarray([[0.0, 1.0], [-1.0, 0.0]])[None, :, None, :, None]
-    i2 = jnp.eye(2)[None, :, None, :, None]
-    lift = lambda A: A[None, None, :, None, :]  # noqa: E731
-    blocks = i2 * lift(Kt) - (k * w0) ** 2 * i2 * lift(s.M) + k * w0 * d * lift(Ct)
-    blocks = blocks.reshape(K, 2 * n, 2 * n)
+    # time-invariant: one (2n, 2n) system per harmonic
+    blocks = harmonic_blocks(Kt, s.M, Ct, w0, np.arange(1, K + 1)).reshape(K, 2 * n, 2 * n)
     mean = jnp.linalg.solve(Kt, F[0])
     osc = jnp.linalg.solve(blocks, F[1:].reshape(K, 2 * n, 1))[..., 0].reshape(2 * K, n)
     X = jnp.concatenate([mean[None], osc])
     return (X / problem.x_scale).reshape(-1)
+
+
+def harmonic_blocks(stiffness: Array, mass: Array, damping: Array, w0,
+                    harmonics) -> Array:
+    """``stiffness + w0^2 mass d^2/dtau^2 + w0 damping d/dtau`` (each ``(n, n)``) on the
+    cosine and sine coefficients of each harmonic number in ``harmonics`` ``(H,)``:
+    ``(H, 2, n, 2, n)``, rows and columns ``(cos k, sin k)``; ``d/dtau`` of ``(cos, sin)``
+    coefficients is ``k [[0, 1], [-1, 0]]`` (``_aft.derivative_matrix``)."""
+    k = jnp.asarray(harmonics, dtype=float)[:, None, None, None, None]  # (H, a, i, b, j)
+    d = jnp.asarray([[0.0, 1.0], [-1.0, 0.0]])[None, :, None, :, None]
+    i2 = jnp.eye(2)[None, :, None, :, None]
+    lift = lambda A: A[None, None, :, None, :]  # noqa: E731
+    return i2 * lift(stiffness) - (k * w0) ** 2 * i2 * lift(mass) + k * w0 * d * lift(damping)
 
 
 def newton(problem: HBProblem, omega, y0: Array) -> HBSolution:
