@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import gearjax as gj
-from gearjax import _bordered, _hb
+from gearjax import _bordered, _hb, _sweep
 from gearjax._assembly import assemble
 from gearjax._plot import plot_sweep
 from gearjax._stability import stability
@@ -59,8 +59,9 @@ def breakdown(train, result) -> None:
     if bool(json.loads(ds.attrs["solver"])["linear"]):
         system = dataclasses.replace(system, backlash=jnp.zeros_like(system.backlash))
     print(f"{'K':>4} {'unknowns':>9} {'condensed':>10} {'residual':>9} {'jacobian':>9} "
-          f"{'dense LU':>9} {'condensed':>10} {'ratio':>6} {'stability':>10}  (ms, one "
-          "evaluation; factor + solve of the bordered system, Jacobian included)")
+          f"{'dense LU':>9} {'condensed':>10} {'ratio':>6} {'stability':>10} {'post/pt':>8}"
+          f"  (ms, one evaluation; factor + solve of the bordered system, Jacobian included;"
+          f" post/pt: responses + stability of 32 points, {_sweep.post_threads()} threads)")
     first = {}  # the first segment of each K
     for f_a, f_b, K in result.segments:
         first.setdefault(K, (f_a, f_b))
@@ -78,6 +79,9 @@ def breakdown(train, result) -> None:
             _bordered.factor(p, y, w, g, t[:-1], t[-1]), t))
         X = y.reshape(problem.shape) * problem.x_scale
         stab = jax.jit(stability)
+        post = lambda p, X, w: _sweep._point_rows(  # noqa: E731
+            p, jnp.stack([X] * 32), jnp.full(32, w), np.zeros(32, int),
+            _sweep.static_mesh_forces(system))
         nv = 0 if problem.mesh_null is None else problem.mesh_null.shape[1]
         reduced = (problem.shape[1] - nv) * problem.shape[0]
         t_dense = _best_of(bordered, dense, y, omega, g, t)
@@ -86,7 +90,8 @@ def breakdown(train, result) -> None:
               f"{1e3 * _best_of(res, problem, y, omega):>9.2f} "
               f"{1e3 * _best_of(jac, problem, y, omega):>9.2f} {1e3 * t_dense:>9.2f} "
               f"{1e3 * t_cond:>10.2f} {t_dense / t_cond:>6.2f} "
-              f"{1e3 * _best_of(stab, problem, X, omega, repeat=2):>10.2f}")
+              f"{1e3 * _best_of(stab, problem, X, omega, repeat=2):>10.2f} "
+              f"{1e3 / 32 * _best_of(post, problem, X, omega, repeat=2):>8.2f}")
 
 
 _COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration",

@@ -348,8 +348,10 @@ def _tree_product(E):
     return E[0]
 
 
-def _monodromy_scaled(problem: HBProblem, X, omega, n_steps: int | None):
-    """Monodromy in the scaled coordinates ``(q, u)``, with the frame and the orbit."""
+def _monodromy_scaled(problem: HBProblem, X, omega, n_steps: int | None, frame=None):
+    """Monodromy in the scaled coordinates ``(q, u)``, with the frame and the orbit.
+    ``frame``: from :func:`_frame` (built here when ``None``); given, the computation
+    calls no LAPACK routine (see :func:`verdict_basis`)."""
     n_steps = floquet_steps(problem) if n_steps is None else n_steps
     if n_steps < 2 or n_steps & (n_steps - 1):
         raise ValueError(
@@ -359,7 +361,7 @@ def _monodromy_scaled(problem: HBProblem, X, omega, n_steps: int | None):
     w0 = omega / problem.settings.eta
     period = 2 * jnp.pi / w0
     h = period / n_steps
-    frame = _frame(problem)
+    frame = _frame(problem) if frame is None else frame
     orbit = _Orbit(P=X @ s.W.T, w0=w0, omega=omega, problem=problem)
     chunk = min(CHUNK, n_steps)
     p, dp = orbit.on_grid(n_steps)  # (N, m) at the step starts
@@ -530,20 +532,56 @@ def stability(problem: HBProblem, X: Array, omega, tol=1e-6, n_steps: int | None
     Jit- and vmap-able over ``X``, ``omega`` (CPU: it needs a non-symmetric
     eigen-decomposition).
     """
-    s = problem.system
-    Phi, frame, _ = _monodromy_scaled(problem, X, omega, n_steps)
+    basis = verdict_basis(problem)
+    Phi, _, _ = _monodromy_scaled(problem, X, omega, n_steps, basis.frame)
     mu, V = jnp.linalg.eig(Phi)
-    dz = frame.Linv.T @ V[: s.n_dof]  # (n, 2n): displacement part of every Floquet mode
+    return verdict(problem, basis, mu, V, tol)
+
+
+class VerdictBasis(eqx.Module):
+    """What the Floquet verdict needs of the system, the same for every solution: the
+    scaled frame of the monodromy (:class:`_Frame`) and the model's rigid-body modes
+    (``modal`` ``(n, n)`` M-normalised shapes, ``rigid`` ``(n,)`` bool)."""
+
+    frame: _Frame
+    modal: Array
+    rigid: Array
+
+
+def verdict_basis(problem: HBProblem) -> VerdictBasis:
+    """:class:`VerdictBasis` of ``problem`` (Cholesky and symmetric eigen-decompositions).
+
+    With it, :func:`_monodromy_scaled` and :func:`verdict` call no LAPACK routine: the
+    sweep evaluates them in several threads at once, and jaxlib 0.10's CPU LAPACK
+    kernels can deadlock XLA's thread pool when several run concurrently (each waits
+    on pool tasks that the others hold the threads for), so the only non-symmetric
+    eigen-decomposition there is NumPy's, outside XLA."""
+    _, modal, _, rigid, _ = mode_classes(problem.system)
+    return VerdictBasis(frame=_frame(problem), modal=modal, rigid=rigid)
+
+
+def scaled_monodromy(problem: HBProblem, basis: VerdictBasis, X: Array, omega) -> Array:
+    """Monodromy matrix ``(2n, 2n)`` of one solution in the scaled coordinates of
+    ``basis.frame`` (default steps; no LAPACK call): its eigenvalues are the Floquet
+    multipliers, its eigenvalues and eigenvectors the input of :func:`verdict`."""
+    return _monodromy_scaled(problem, X, omega, None, basis.frame)[0]
+
+
+def verdict(problem: HBProblem, basis: VerdictBasis, mu, V, tol=1e-6) -> Stability:
+    """:class:`Stability` from the eigenvalues ``mu`` ``(2n,)`` and eigenvectors ``V``
+    ``(2n, 2n)`` (columns) of the scaled monodromy matrix (jittable; no LAPACK call)."""
+    s = problem.system
+    dz = basis.frame.Linv.T @ V[: s.n_dof]  # (n, 2n): displacement part of every Floquet mode
     lever = jnp.max(jnp.abs(s.W), axis=0) if s.n_meshes else jnp.zeros(s.n_dof)
     size = jnp.max(lever[:, None] * jnp.abs(dz), axis=0)
     strain = jnp.max(jnp.abs(s.W @ dz), axis=0) if s.n_meshes else jnp.zeros(2 * s.n_dof)
     ratio = jnp.where(size > 0, strain / jnp.where(size > 0, size, 1.0), 0.0)
-    _, modal, _, rigid, _ = mode_classes(s)
-    a = jnp.abs(modal.T @ (s.M @ dz)) ** 2  # (n, 2n): modal content of every Floquet mode
+    a = jnp.abs(basis.modal.T @ (s.M @ dz)) ** 2  # (n, 2n): modal content of every Floquet mode
     total = jnp.sum(a, axis=0)
-    share = jnp.sum(jnp.where(rigid[:, None], a, 0.0), axis=0) / jnp.where(total > 0, total, 1.0)
+    share = jnp.sum(jnp.where(basis.rigid[:, None], a, 0.0), axis=0) / jnp.where(
+        total > 0, total, 1.0)
     rank = jnp.argsort(jnp.argsort(-share))  # 0 for the most rigid-body-like Floquet mode
-    excluded = rank < 2 * jnp.sum(rigid)
+    excluded = rank < 2 * jnp.sum(basis.rigid)
     max_abs = jnp.max(jnp.where(excluded, 0.0, jnp.abs(mu)))
     return Stability(multipliers=mu, mesh_strain=ratio, rigid_share=share, excluded=excluded,
                      max_abs=max_abs, stable=max_abs < 1.0 + tol)

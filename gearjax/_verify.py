@@ -240,12 +240,12 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
     for K, problem in problems.items():
         idx = np.flatnonzero(ks == K)
         Xs = jnp.stack([ys[i] for i in idx]).reshape((-1,) + problem.shape) * problem.x_scale
-        resp, stab = _sweep._batch_post(problem, Xs, jnp.asarray(omegas[idx]),
-                                        jnp.asarray(case.F_static))
+        post = _sweep._point_rows(problem, Xs, jnp.asarray(omegas[idx]), result[idx],
+                                  jnp.asarray(case.F_static))
         for j, i in enumerate(idx):
             X[i, :problem.shape[0]] = np.asarray(Xs[j])
-            stable[i] = bool(stab.stable[j])
-            rows[i] = jax.tree.map(lambda a: np.asarray(a[j]), resp)
+            stable[i] = bool(post["stable"][j])
+            rows[i] = jax.tree.map(lambda a: np.asarray(a[j]), post["responses"])
     responses = jax.tree.map(lambda *a: np.stack(a), *rows)
     failed = result != _hb.CONVERGED
     responses = jax.tree.map(lambda a: np.where(failed[:, None], np.nan, a), responses)

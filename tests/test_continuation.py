@@ -127,3 +127,30 @@ def test_branch_through_folds_is_not_a_loop(branch):
     br = C.continue_branch(branch["param"], branch["y0"], 0.5, 1.5, branch["settings"], 400)
     assert br.stop == "reached_end"
     assert len(C.distinct_folds(br.fold_lam[br.fold])) == 2
+
+
+def test_broyden_step_learns_a_rank_one_jacobian_error():
+    """Broyden's method on a linear system whose starting matrix is off by a rank-one term
+    ends in at most two steps (Gay, SIAM J. Numer. Anal. 16 (1979): at most 2r for rank
+    r), where the chord iteration with that matrix only contracts linearly (0.6 here)."""
+    rng = np.random.default_rng(3)
+    n = 40
+    A = np.eye(n) + 0.1 * rng.standard_normal((n, n))
+    u, v = rng.standard_normal(n), rng.standard_normal(n)
+    B0 = A + 0.6 * np.outer(u, v) / (v @ np.linalg.solve(A, u))  # chord ratio 0.6 / 1.6
+    b = rng.standard_normal(n)
+    exact = np.linalg.solve(A, b)
+    solve = jax.jit(lambda z, steps, i: C._broyden_step(z, steps, i))
+
+    def run(quasi, iterations):
+        z, steps = np.zeros(n), jnp.zeros((8, n))
+        for i in range(iterations):
+            d = -np.linalg.solve(B0, A @ z - b)
+            if quasi:
+                d = np.asarray(solve(jnp.asarray(d), steps, i))
+                steps = steps.at[i].set(d)
+            z = z + d
+        return np.max(np.abs(z - exact)) / np.max(np.abs(exact))
+
+    assert run(True, 3) < 1e-12
+    assert run(False, 3) > 1e-2 and run(False, 30) < 1e-10

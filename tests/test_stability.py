@@ -334,6 +334,35 @@ def test_attractor_past_the_fold_is_stable_whatever_its_rigid_pair(paper):
     assert bool(st.stable) and float(st.max_abs) < 0.2
 
 
+def test_sweep_post_processing_in_threads_matches_stability(paper):
+    """The sweep's responses and stability run in threads, a chunk of points per compiled
+    call, with the eigenvalues from NumPy: the same verdict as :func:`gj.stability` point
+    by point, and no LAPACK call in the threaded programs (jaxlib 0.10's CPU LAPACK
+    kernels can deadlock XLA's thread pool when several run at once)."""
+    problem = _hb.hb_problem(paper, _hb.HarmonicBalance(n_harmonics=16))
+    # 2 chunks, one padded; the linear orbits are unstable in the parametric instability
+    omegas = 2 * np.pi * np.r_[np.linspace(2500.0, 4000.0, 6), np.linspace(6700, 6880, 5)] / 7
+    Xs = jnp.stack([_hb.linear_guess(problem, w).reshape(problem.shape) * problem.x_scale
+                    for w in omegas])
+    F_static = _sweep.static_mesh_forces(paper)
+    rows = _sweep._point_rows(problem, Xs, jnp.asarray(omegas), np.zeros(11, int), F_static)
+    for i, w in enumerate(omegas):
+        st = stability(problem, Xs[i], float(w))
+        assert matched_error(rows["multipliers"][i], st.multipliers) < 1e-10
+        assert rows["stable"][i] == bool(st.stable)
+        np.testing.assert_allclose(rows["max_multiplier"][i], float(st.max_abs), rtol=1e-10)
+        excluded = np.asarray(st.multipliers)[np.asarray(st.excluded)]
+        assert matched_error(rows["multipliers"][i][rows["excluded"][i]], excluded) < 1e-10
+    assert len(set(rows["stable"])) == 2  # both verdicts occur among these points
+    basis = _stability.verdict_basis(problem)
+    chunk = (problem, basis, Xs[:8], jnp.asarray(omegas[:8]), F_static)
+    mu = jnp.asarray(rows["multipliers"][:8])
+    V = jnp.zeros((8, 28, 28), complex)
+    for program in (_sweep._batch_monodromy.lower(*chunk),
+                    _sweep._batch_verdict.lower(problem, basis, mu, V)):
+        assert "lapack" not in program.as_text().lower()
+
+
 def test_step_count_must_be_a_power_of_two():
     problem = _hb.hb_problem(oscillator(clearance=1.0), SETTINGS)
     X = jnp.zeros(problem.shape)
