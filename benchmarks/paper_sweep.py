@@ -79,9 +79,9 @@ def breakdown(train, result) -> None:
             _bordered.factor(p, y, w, g, t[:-1], t[-1]), t))
         X = y.reshape(problem.shape) * problem.x_scale
         stab = jax.jit(stability)
+        F_static = _sweep.static_mesh_forces(system)
         post = lambda p, X, w: _sweep._point_rows(  # noqa: E731
-            p, jnp.stack([X] * 32), jnp.full(32, w), np.zeros(32, int),
-            _sweep.static_mesh_forces(system))
+            p, jnp.stack([X] * 32), jnp.full(32, w), np.zeros(32, int), F_static)
         nv = 0 if problem.mesh_null is None else problem.mesh_null.shape[1]
         reduced = (problem.shape[1] - nv) * problem.shape[0]
         t_dense = _best_of(bordered, dense, y, omega, g, t)

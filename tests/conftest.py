@@ -20,3 +20,16 @@ def _free_compiled_programs():
     default): XLA then fails to compile ("Cannot allocate memory") or crashes."""
     yield
     jax.clear_caches()
+
+
+@pytest.fixture(scope="module")
+def paper_system():
+    """The assembled ``System`` of the bundled paper case's first gear (its geometry
+    warning silenced)."""
+    import warnings
+
+    import gearjax as gj
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gj.GeometryWarning)
+        return gj.assemble(gj.load_train())

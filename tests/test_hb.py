@@ -1,7 +1,6 @@
 """Harmonic balance core: AFT operators, residual, structured Jacobian, Newton."""
 
 import dataclasses
-import warnings
 
 import jax
 import jax.numpy as jnp
@@ -16,13 +15,6 @@ def oscillator(clearance=0.0, c=0.1, k_cos=None, mu=(1,)):
     return gj.system_from_matrices([[1.0]], [[c]], [[0.0]], [[1.0]], [1.0], backlash=[clearance],
                                    k_cos=k_cos, f_mean=[0.1], f_cos=[[0.03]], f_sin=[[0.0]],
                                    forcing_mu=[1], mesh_mu=mu)
-
-
-@pytest.fixture(scope="module")
-def paper():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.assemble(gj.load_train())
 
 
 def test_aft_round_trip_and_derivative():
@@ -51,12 +43,13 @@ def test_linear_time_invariant_limit_is_exact_frequency_response(omega):
     np.testing.assert_allclose(sol.X[3:, 0], 0.0, atol=1e-15)
 
 
-def test_paper_linear_time_invariant_limit(paper):
+def test_paper_linear_time_invariant_limit(paper_system):
     """Paper train with constant stiffness and no backlash: HB equals the complex FRF."""
-    lti = eqx_set(paper, k_cos=jnp.zeros_like(paper.k_cos), k_sin=jnp.zeros_like(paper.k_sin),
-                  backlash=jnp.zeros_like(paper.backlash),
-                  f_cos=jnp.zeros((paper.n_dof, 1)).at[0].set(10.0),
-                  f_sin=jnp.zeros((paper.n_dof, 1)), forcing_mu=(1,))
+    lti = eqx_set(paper_system, k_cos=jnp.zeros_like(paper_system.k_cos),
+                  k_sin=jnp.zeros_like(paper_system.k_sin),
+                  backlash=jnp.zeros_like(paper_system.backlash),
+                  f_cos=jnp.zeros((paper_system.n_dof, 1)).at[0].set(10.0),
+                  f_sin=jnp.zeros((paper_system.n_dof, 1)), forcing_mu=(1,))
     problem = _hb.hb_problem(lti, _hb.HarmonicBalance(n_harmonics=3))
     omega = 2 * np.pi * 5000.0
     sol = _hb.solve_hb(problem, omega)
@@ -69,14 +62,15 @@ def test_paper_linear_time_invariant_limit(paper):
     np.testing.assert_allclose(sol.X[1] - 1j * sol.X[2], x1, rtol=1e-8, atol=1e-12 * np.abs(x1).max())
 
 
-def test_linear_guess_and_one_factorisation_solve(paper):
+def test_linear_guess_and_one_factorisation_solve(paper_system):
     """``linear_guess`` (one (2n, 2n) system per harmonic) is the exact response of the
     constant-stiffness train without backlash (the complex FRF of every harmonic);
     ``solve_linear`` (one factorisation) equals Newton on the time-varying train without
     backlash, whose mesh force is linear: ``g' = 1`` also at ``p = 0``."""
     omega = 2 * np.pi * 3000.0 / 7
-    lti = eqx_set(paper, k_cos=jnp.zeros_like(paper.k_cos), k_sin=jnp.zeros_like(paper.k_sin),
-                  backlash=jnp.zeros_like(paper.backlash))
+    lti = eqx_set(paper_system, k_cos=jnp.zeros_like(paper_system.k_cos),
+                  k_sin=jnp.zeros_like(paper_system.k_sin),
+                  backlash=jnp.zeros_like(paper_system.backlash))
     problem = _hb.hb_problem(lti, _hb.HarmonicBalance(n_harmonics=8))
     X = _hb.linear_guess(problem, omega).reshape(problem.shape) * problem.x_scale
     Kt, M = np.asarray(lti.mean_stiffness()), np.asarray(lti.M)
@@ -89,7 +83,7 @@ def test_linear_guess_and_one_factorisation_solve(paper):
         np.testing.assert_allclose(X[2 * k - 1] - 1j * X[2 * k], xk, atol=1e-10 * scale)
     np.testing.assert_allclose(X[0], np.linalg.solve(Kt, F[0]), rtol=1e-10)
     assert float(jax.grad(lambda p: gj.backlash(p, 0.0))(0.0)) == 1.0
-    tv = _hb.hb_problem(eqx_set(paper, backlash=jnp.zeros_like(paper.backlash)),
+    tv = _hb.hb_problem(eqx_set(paper_system, backlash=jnp.zeros_like(paper_system.backlash)),
                         _hb.HarmonicBalance(n_harmonics=8))
     one, ref = _hb.solve_linear(tv, omega), _hb.solve_hb(tv, omega)
     assert int(one.result) == _hb.CONVERGED and int(one.steps) <= 3
@@ -117,8 +111,8 @@ def test_product_matrix_is_the_aft_of_a_multiplication(n_time):
 
 @pytest.mark.parametrize("contact", [False, True])
 @pytest.mark.parametrize("n_time", [64, 14])  # 14 = 2K + 2: products alias, as in the AFT
-def test_structured_jacobian_equals_jacfwd(paper, contact, n_time):
-    system = eqx_set(paper, contact_damping=contact)
+def test_structured_jacobian_equals_jacfwd(paper_system, contact, n_time):
+    system = eqx_set(paper_system, contact_damping=contact)
     problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=6, n_time=n_time))
     y = _hb.linear_guess(problem, 2 * np.pi * 4000 / 7)
     y = y + 0.5 * jax.random.normal(jax.random.PRNGKey(0), y.shape)  # some meshes separate
@@ -132,13 +126,13 @@ def test_structured_jacobian_equals_jacfwd(paper, contact, n_time):
     np.testing.assert_allclose(dw, fd, atol=1e-6 * float(jnp.max(jnp.abs(dw))))
 
 
-def test_newton_converges_on_paper_case_with_backlash(paper):
-    problem = _hb.hb_problem(paper, _hb.HarmonicBalance(n_harmonics=16))
+def test_newton_converges_on_paper_case_with_backlash(paper_system):
+    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=16))
     omega = 2 * np.pi * 3000 / 7
     sol = jax.jit(_hb.solve_hb)(problem, omega)
     assert int(sol.result) == _hb.CONVERGED and float(sol.residual_norm) < 1e-8
     # mean mesh forces carry the static load: stage-1 sun mesh 8942 N
-    P = sol.X @ paper.W.T
+    P = sol.X @ paper_system.W.T
     assert float(jnp.max(jnp.abs(P[0] - (8942.2 / 4.5e8 + 5e-5)) [:4])) < 2e-6
 
 
@@ -152,8 +146,9 @@ def test_smoothed_backlash_is_close_odd_and_exact_without_clearance():
     assert np.all(np.isfinite(jax.vmap(jax.grad(lambda q: gj.backlash(q, 0.0, s)))(p)))
 
 
-def test_structured_jacobian_with_smoothed_backlash(paper):
-    problem = _hb.hb_problem(paper, _hb.HarmonicBalance(n_harmonics=6, n_time=64, smoothing=0.05))
+def test_structured_jacobian_with_smoothed_backlash(paper_system):
+    problem = _hb.hb_problem(paper_system,
+                             _hb.HarmonicBalance(n_harmonics=6, n_time=64, smoothing=0.05))
     omega = 2 * np.pi * 4000 / 7
     y = _hb.linear_guess(problem, omega)
     y = y + 0.5 * jax.random.normal(jax.random.PRNGKey(1), y.shape)

@@ -8,7 +8,6 @@ harmonics double. Each is checked here where it is hardest: with tooth separatio
 
 import dataclasses
 import math
-import warnings
 
 import jax
 import jax.numpy as jnp
@@ -18,13 +17,6 @@ import pytest
 import gearjax as gj
 from gearjax import _continuation as C, _hb, _sweep
 from gearjax._responses import mesh_responses, static_mesh_forces
-
-
-@pytest.fixture(scope="module")
-def paper():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.assemble(gj.load_train())
 
 
 def oscillator_folds(n_time):
@@ -71,19 +63,19 @@ def rms_at(system, f_hz, K, n_time=None):
     return problem.n_time, np.asarray(resp.rms_force), np.asarray(resp.separation)
 
 
-def test_time_sample_rule_paper_with_separation(paper):
+def test_time_sample_rule_paper_with_separation(paper_system):
     # 2480 Hz with the example's 0.05 mm backlash: the stage-2 sun meshes lose contact
     # for about 2% of the period
-    T, rms, sep = rms_at(paper, 2480.0, 32)
-    T2, rms2, _ = rms_at(paper, 2480.0, 32, 2 * T)
+    T, rms, sep = rms_at(paper_system, 2480.0, 32)
+    T2, rms2, _ = rms_at(paper_system, 2480.0, 32, 2 * T)
     assert T == 512 and sep.max() > 0.01
     np.testing.assert_allclose(rms, rms2, rtol=1e-3)
 
 
 @pytest.mark.parametrize("f_hz", [2000.0, 4800.0, 6000.0])
-def test_harmonics_rule_doubling_changes_rms_by_less_than_half_a_percent(paper, f_hz):
+def test_harmonics_rule_doubling_changes_rms_by_less_than_half_a_percent(paper_system, f_hz):
     # 2000 Hz: K = 64, 4800 Hz: K = 48 (K = 32 would be off by 0.52%), 6000 Hz: K = 32
-    linear = dataclasses.replace(paper, backlash=jnp.zeros_like(paper.backlash))
+    linear = dataclasses.replace(paper_system, backlash=jnp.zeros_like(paper_system.backlash))
     K = _sweep.harmonics_rule(f_hz / 7, _hb.highest_excitation(linear))
     assert K == {2000.0: 64, 4800.0: 48, 6000.0: 32}[f_hz]
     _, rms, _ = rms_at(linear, f_hz, K)
@@ -91,13 +83,13 @@ def test_harmonics_rule_doubling_changes_rms_by_less_than_half_a_percent(paper, 
     assert np.max(np.abs(rms - rms2) / rms2) < 5e-3
 
 
-def test_harmonics_rule_with_tooth_separation(paper):
+def test_harmonics_rule_with_tooth_separation(paper_system):
     # 4000 Hz with the 0.05 mm backlash: the stage-1 ring meshes separate for about 15%
     # of the period; the rule's K = 48 is 0.10% off K = 128 (K = 32: 2.8% off), and
     # doubling it must change the RMS forces by less than 0.5%
-    K = _sweep.harmonics_rule(4000.0 / 7, _hb.highest_excitation(paper))
+    K = _sweep.harmonics_rule(4000.0 / 7, _hb.highest_excitation(paper_system))
     assert K == 48
-    _, rms, sep = rms_at(paper, 4000.0, K)
-    _, rms2, sep2 = rms_at(paper, 4000.0, 2 * K)
+    _, rms, sep = rms_at(paper_system, 4000.0, K)
+    _, rms2, sep2 = rms_at(paper_system, 4000.0, 2 * K)
     assert sep.max() > 0.1 and sep2.max() > 0.1
     assert np.max(np.abs(rms - rms2) / rms2) < 5e-3

@@ -3,7 +3,6 @@ rigid-mode exclusion, bifurcation kinds. References are independent: analytic ei
 scipy's solve_ivp on the variational equations, a shooting solution of the non-linear flow."""
 
 import time
-import warnings
 
 import jax
 import jax.numpy as jnp
@@ -271,19 +270,12 @@ def test_vmap_over_points_matches_single_points():
 # ------------------------------------------------------------------------ paper gear
 
 
-@pytest.fixture(scope="module")
-def paper():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.assemble(gj.load_train())
-
-
-def test_paper_gear_at_3khz(paper):
+def test_paper_gear_at_3khz(paper_system):
     """K = 16 at a stage-1 mesh frequency of 3 kHz: 28 multipliers, the undamped near-rigid
     pair (1e2 N m/rad housing springs) recognised and excluded, the solution stable. The
     excluded Floquet modes are the model's rigid mode (share 1 - 1e-9, every other mode
     1e-7 or less) and strain no mesh (7.5e-5, every other mode 0.4 or more)."""
-    problem = _hb.hb_problem(paper, _hb.HarmonicBalance(n_harmonics=16))
+    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=16))
     omega = 2 * np.pi * 3000 / 7
     sol = jax.jit(_hb.solve_hb)(problem, omega)
     assert int(sol.result) == _hb.CONVERGED
@@ -306,14 +298,14 @@ def test_paper_gear_at_3khz(paper):
     assert np.all(share[excluded] > 1 - 1e-6) and np.all(share[~excluded] < 1e-6)
     assert np.all(strain[excluded] < 1e-4) and np.all(strain[~excluded] > 0.4)
     # the pair turns by the near-rigid frequency (41.2 Hz) per period (T = 7 / 3000 s)
-    lam = scipy.linalg.eigh(np.asarray(paper.mean_stiffness()), np.asarray(paper.M),
+    lam = scipy.linalg.eigh(np.asarray(paper_system.mean_stiffness()), np.asarray(paper_system.M),
                             eigvals_only=True)
     f_rigid = np.sqrt(lam.min()) / (2 * np.pi)
     assert abs(np.angle(pair).max() - 2 * np.pi * f_rigid * 7 / 3000) < 1e-3
     assert bool(st.stable) and float(st.max_abs) < 0.5
 
 
-def test_attractor_past_the_fold_is_stable_whatever_its_rigid_pair(paper):
+def test_attractor_past_the_fold_is_stable_whatever_its_rigid_pair(paper_system):
     """Past the 3.27 kHz fold (0.05 mm backlash, K = 16, 3306.43 Hz) a time integration
     from the static contact state settles on an orbit, and harmonic balance from its
     harmonics converges: an attractor. Its near-rigid pair lies 1.5e-6 outside the unit
@@ -322,7 +314,7 @@ def test_attractor_past_the_fold_is_stable_whatever_its_rigid_pair(paper):
     model's rigid mode (share 1 - 2e-8, the others 1.2e-5 at most), so it is excluded and
     the verdict is stable, as the integration found. (A margin on ``|mu| - 1`` for
     mesh-free modes called this orbit unstable.)"""
-    problem = _hb.hb_problem(paper, _hb.HarmonicBalance(n_harmonics=16))
+    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=16))
     omega = 2 * np.pi * 3306.43 / 7
     sol = _sweep.settled_start(problem, omega)
     assert int(sol.result) == _hb.CONVERGED
@@ -334,17 +326,17 @@ def test_attractor_past_the_fold_is_stable_whatever_its_rigid_pair(paper):
     assert bool(st.stable) and float(st.max_abs) < 0.2
 
 
-def test_sweep_post_processing_in_threads_matches_stability(paper):
+def test_sweep_post_processing_in_threads_matches_stability(paper_system):
     """The sweep's responses and stability run in threads, a chunk of points per compiled
     call, with the eigenvalues from NumPy: the same verdict as :func:`gj.stability` point
     by point, and no LAPACK call in the threaded programs (jaxlib 0.10's CPU LAPACK
     kernels can deadlock XLA's thread pool when several run at once)."""
-    problem = _hb.hb_problem(paper, _hb.HarmonicBalance(n_harmonics=16))
+    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=16))
     # 2 chunks, one padded; the linear orbits are unstable in the parametric instability
     omegas = 2 * np.pi * np.r_[np.linspace(2500.0, 4000.0, 6), np.linspace(6700, 6880, 5)] / 7
     Xs = jnp.stack([_hb.linear_guess(problem, w).reshape(problem.shape) * problem.x_scale
                     for w in omegas])
-    F_static = _sweep.static_mesh_forces(paper)
+    F_static = _sweep.static_mesh_forces(paper_system)
     rows = _sweep._point_rows(problem, Xs, jnp.asarray(omegas), np.zeros(11, int), F_static)
     for i, w in enumerate(omegas):
         st = stability(problem, Xs[i], float(w))
