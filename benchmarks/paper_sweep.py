@@ -52,14 +52,16 @@ def _best_of(fn, *args, repeat: int = 5) -> float:
 def breakdown(train, result) -> None:
     """Cost per K, at a point of its first segment (ms, compile excluded): one residual,
     one structured Jacobian, one bordered factorisation + solve of the continuation, done
-    dense (the Jacobian, its LU) and condensed to the motions that deflect a mesh (what
-    the continuation does, ``gearjax._bordered``), and one Floquet stability evaluation."""
+    dense (the Jacobian, its LU) and condensed to the motions that deflect a mesh
+    (``gearjax._bordered``), the latter also with its LU in single precision (what the
+    sweep's continuation does), and one Floquet stability evaluation."""
     ds = result.dataset
     system = assemble(train, "first")
     if bool(json.loads(ds.attrs["solver"])["linear"]):
         system = dataclasses.replace(system, backlash=jnp.zeros_like(system.backlash))
     print(f"{'K':>4} {'unknowns':>9} {'condensed':>10} {'residual':>9} {'jacobian':>9} "
-          f"{'dense LU':>9} {'condensed':>10} {'ratio':>6} {'stability':>10} {'post/pt':>8}"
+          f"{'dense LU':>9} {'condensed':>10} {'ratio':>6} {'single':>7} {'stability':>10} "
+          f"{'post/pt':>8}"
           f"  (ms, one evaluation; factor + solve of the bordered system, Jacobian included;"
           f" post/pt: responses + stability of 32 points, {_sweep.post_threads()} threads)")
     first = {}  # the first segment of each K
@@ -75,8 +77,8 @@ def breakdown(train, result) -> None:
         t = jnp.ones(problem.size + 1) / np.sqrt(problem.size + 1)
         res = jax.jit(_hb.residual)
         jac = jax.jit(_hb.jacobian)
-        bordered = jax.jit(lambda p, y, w, g, t: _bordered.solve(
-            _bordered.factor(p, y, w, g, t[:-1], t[-1]), t))
+        bordered = jax.jit(lambda p, y, w, g, t, single: _bordered.solve(
+            _bordered.factor(p, y, w, g, t[:-1], t[-1], single), t), static_argnums=5)
         X = y.reshape(problem.shape) * problem.x_scale
         stab = jax.jit(stability)
         F_static = _sweep.static_mesh_forces(system)
@@ -84,12 +86,13 @@ def breakdown(train, result) -> None:
             p, jnp.stack([X] * 32), jnp.full(32, w), np.zeros(32, int), F_static)
         nv = 0 if problem.mesh_null is None else problem.mesh_null.shape[1]
         reduced = (problem.shape[1] - nv) * problem.shape[0]
-        t_dense = _best_of(bordered, dense, y, omega, g, t)
-        t_cond = _best_of(bordered, problem, y, omega, g, t)
+        t_dense = _best_of(bordered, dense, y, omega, g, t, False)
+        t_cond = _best_of(bordered, problem, y, omega, g, t, False)
+        t_single = _best_of(bordered, problem, y, omega, g, t, True)
         print(f"{K:>4} {problem.size:>9} {reduced:>10} "
               f"{1e3 * _best_of(res, problem, y, omega):>9.2f} "
               f"{1e3 * _best_of(jac, problem, y, omega):>9.2f} {1e3 * t_dense:>9.2f} "
-              f"{1e3 * t_cond:>10.2f} {t_dense / t_cond:>6.2f} "
+              f"{1e3 * t_cond:>10.2f} {t_dense / t_cond:>6.2f} {1e3 * t_single:>7.2f} "
               f"{1e3 * _best_of(stab, problem, X, omega, repeat=2):>10.2f} "
               f"{1e3 / 32 * _best_of(post, problem, X, omega, repeat=2):>8.2f}")
 

@@ -46,11 +46,13 @@ class Factors(eqx.Module):
     """Factors of a bordered Jacobian (:func:`factor`).
 
     ``lu``, ``piv``: LU of the condensed bordered matrix, ``(C r + 1)^2`` (the full
-    ``(C n + 1)^2`` one when not condensed, and the other fields ``None``). ``R``
-    ``(n, n)``: unknown basis ``[u | v]``; ``P`` ``(C, n, n)``: equation basis per
-    coefficient row. Per group of rows (the mean; the ``K`` harmonic pairs), as tuples
-    ``(mean, pairs)``: ``Vinv`` the inverse of the ``v``-``v`` block, ``E = Vinv L_vu``,
-    ``F = L_uv Vinv``, ``hv = Vinv g_v``, ``wv = Vinv^T t_v``.
+    ``(C n + 1)^2`` one when not condensed, and the other fields ``None``); in single
+    precision when factorised with ``single``, and :func:`solve` then solves with them in
+    single precision, everything around in double. ``R`` ``(n, n)``: unknown basis
+    ``[u | v]``; ``P`` ``(C, n, n)``: equation basis per coefficient row. Per group of
+    rows (the mean; the ``K`` harmonic pairs), as tuples ``(mean, pairs)``: ``Vinv`` the
+    inverse of the ``v``-``v`` block, ``E = Vinv L_vu``, ``F = L_uv Vinv``, ``hv = Vinv
+    g_v``, ``wv = Vinv^T t_v``.
     """
 
     lu: Array
@@ -64,15 +66,18 @@ class Factors(eqx.Module):
     wv: tuple | None = None
 
 
-def factor(problem: _hb.HBProblem, y: Array, omega, g: Array, ty: Array, tlam) -> Factors:
+def factor(problem: _hb.HBProblem, y: Array, omega, g: Array, ty: Array, tlam,
+           single: bool = False) -> Factors:
     """Factorise ``[[J(y, omega), g], [ty^T, tlam]]`` (jittable).
 
     **Arguments:** ``y`` ``(N,)`` scaled unknowns; ``omega`` base frequency (rad/s);
-    ``g`` ``(N,)`` the bordering column; ``ty`` ``(N,)``, ``tlam`` the bordering row.
+    ``g`` ``(N,)`` the bordering column; ``ty`` ``(N,)``, ``tlam`` the bordering row;
+    ``single``: the dense LU in single precision (the accuracy of a preconditioner, for
+    quasi-Newton iterations on the double residual: ``_continuation.Settings.single``).
     """
     null = problem.mesh_null  # (n, nv)
     if null is None:
-        return dense(_hb.jacobian(problem, y, omega), g, ty, tlam)
+        return dense(_hb.jacobian(problem, y, omega), g, ty, tlam, single)
     s = problem.system
     C, n = problem.shape
     K = problem.settings.n_harmonics
@@ -115,14 +120,14 @@ def factor(problem: _hb.HBProblem, y: Array, omega, g: Array, ty: Array, tlam) -
     col = _join([u - jnp.einsum("gij,gj->gi", b[3], v) for b, u, v in zip(blocks, gu, gv)], K)
     row = _join([u - jnp.einsum("gji,gj->gi", b[2], v) for b, u, v in zip(blocks, tu, tv)], K)
     corner = tlam - sum(jnp.sum(w * v) for w, v in zip(wv, gv))
-    lu, piv = _bordered_lu(A, col.reshape(-1), row.reshape(-1), corner)
+    lu, piv = _bordered_lu(A, col.reshape(-1), row.reshape(-1), corner, single)
     return Factors(lu=lu, piv=piv, R=R, P=Pc, Vinv=tuple(b[1] for b in blocks),
                    E=tuple(b[2] for b in blocks), F=tuple(b[3] for b in blocks), hv=hv, wv=wv)
 
 
-def dense(J: Array, g: Array, ty: Array, tlam) -> Factors:
+def dense(J: Array, g: Array, ty: Array, tlam, single: bool = False) -> Factors:
     """Factorise ``[[J, g], [ty^T, tlam]]`` as it is (``J`` ``(N, N)``; jittable)."""
-    lu, piv = _bordered_lu(J, g, ty, tlam)
+    lu, piv = _bordered_lu(J, g, ty, tlam, single)
     return Factors(lu=lu, piv=piv)
 
 
@@ -143,15 +148,14 @@ def solve(factors: Factors, rhs: Array) -> Array:
     (jittable)."""
     f = factors
     if f.R is None:
-        return jax.scipy.linalg.lu_solve((f.lu, f.piv), rhs)
+        return _lu_solve(f, rhs)
     C, n, _ = f.P.shape
     K = (C - 1) // 2
     r = n - f.Vinv[0].shape[-1]
     ru, rv = _split(jnp.einsum("aip,ai->ap", f.P, rhs[:-1].reshape(C, n)), r)
     reduced = _join([u - jnp.einsum("gij,gj->gi", F, v) for F, u, v in zip(f.F, ru, rv)], K)
     q = rhs[-1] - sum(jnp.sum(w * v) for w, v in zip(f.wv, rv))
-    sol = jax.scipy.linalg.lu_solve((f.lu, f.piv), jnp.concatenate([reduced.reshape(-1),
-                                                                    q[None]]))
+    sol = _lu_solve(f, jnp.concatenate([reduced.reshape(-1), q[None]]))
     U, dl = sol[:-1].reshape(C, r), sol[-1]
     V = [jnp.einsum("gij,gj->gi", Vi, v) - jnp.einsum("gij,gj->gi", E, u) - h * dl
          for Vi, E, h, v, u in zip(f.Vinv, f.E, f.hv, rv, _groups(U))]
@@ -162,11 +166,19 @@ def solve(factors: Factors, rhs: Array) -> Array:
 # ------------------------------------------------------------------------- parts
 
 
-def _bordered_lu(A: Array, col: Array, row: Array, corner):
-    """LU factors of ``[[A, col], [row^T, corner]]``."""
+def _bordered_lu(A: Array, col: Array, row: Array, corner, single: bool = False):
+    """LU factors of ``[[A, col], [row^T, corner]]``, in single precision with ``single``
+    (:func:`factor`)."""
     top = jnp.concatenate([A, col[:, None]], axis=1)
     bottom = jnp.concatenate([row, jnp.asarray(corner)[None]])[None, :]
-    return jax.scipy.linalg.lu_factor(jnp.concatenate([top, bottom], axis=0))
+    M = jnp.concatenate([top, bottom], axis=0)
+    return jax.scipy.linalg.lu_factor(M.astype(jnp.float32) if single else M)
+
+
+def _lu_solve(factors: Factors, rhs: Array) -> Array:
+    """``rhs`` solved with the LU factors, in their precision, returned in ``rhs``'s."""
+    return jax.scipy.linalg.lu_solve((factors.lu, factors.piv),
+                                     rhs.astype(factors.lu.dtype)).astype(rhs.dtype)
 
 
 def _complete_bases(A: Array) -> Array:

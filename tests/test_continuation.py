@@ -7,7 +7,7 @@ import pytest
 import scipy.integrate
 
 import gearjax as gj
-from gearjax import _aft, _continuation as C, _hb
+from gearjax import _aft, _bordered, _continuation as C, _hb
 
 K, T = 15, 256
 
@@ -154,3 +154,37 @@ def test_broyden_step_learns_a_rank_one_jacobian_error():
 
     assert run(True, 3) < 1e-12
     assert run(False, 3) > 1e-2 and run(False, 30) < 1e-10
+
+
+def test_single_precision_factors(paper_system):
+    """``Settings.single``: the bordered LU in single precision. On the paper gear with
+    tooth separation, solves with those factors are a close preconditioner (relative
+    error far below the corrector's contraction from Jacobian changes) and the refined
+    tangent equals the one from double factors. (The paper sweeps in test_sweep run with
+    single factors end to end.)"""
+    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=8))
+    omega_ref = 2 * np.pi * 2000.0 / 7
+    param = C.FrequencyParameter(problem=problem, omega_ref=jnp.asarray(omega_ref))
+    lam = 3500.0 / 2000.0  # 6% of the mesh samples separated at K = 8
+    sol = _hb.solve_hb(problem, lam * omega_ref)
+    assert bool(sol.converged)
+    deflection = _hb.mesh_samples(problem, sol.X @ paper_system.W.T, lam * omega_ref)[0]
+    assert np.any(np.abs(np.asarray(deflection)) < np.asarray(paper_system.backlash)[:, None])
+    rng = np.random.default_rng(0)
+    ty0, tlam0 = jnp.asarray(rng.normal(size=sol.y.size)), 1.0
+    rhs = jnp.asarray(rng.normal(size=sol.y.size + 1))
+
+    @jax.jit
+    def tangents_and_solves(y):
+        out = []
+        for single in (False, True):
+            ty, tlam, factors = C.tangent_factors(param, y, lam, ty0, tlam0, single)
+            out.append((jnp.append(ty, tlam), _bordered.solve(factors, rhs), factors.lu))
+        return out
+
+    (t_double, x_double, lu_double), (t_single, x_single, lu_single) = tangents_and_solves(
+        sol.y)
+    assert lu_double.dtype == jnp.float64 and lu_single.dtype == jnp.float32
+    np.testing.assert_allclose(t_single, t_double, atol=1e-10)
+    error = float(jnp.linalg.norm(x_single - x_double) / jnp.linalg.norm(x_double))
+    assert 1e-12 < error < 1e-3  # single-precision solves: not exact, and close
