@@ -228,14 +228,16 @@ over the paper sweep (933 tangents): the first correction is 5e-6 of the tangent
 leaves an error of about 1e-10."""
 
 
-def tangent_factors(param: AbstractParameter, y, lam, ty, tlam, single: bool = False):
+def tangent_factors(param: AbstractParameter, y, lam, ty, tlam, single: bool = False,
+                    fallback=None):
     """Factorise the bordered Jacobian at ``(y, lam)`` (last row the previous tangent) and
-    return the new unit tangent ``(ty, tlam)`` with the factors (LU in single precision
-    with ``single``; where its refinement does not converge, the tangent is solved again
-    with double factors, the single ones kept)."""
+    return the new unit tangent ``(ty, tlam)`` with the factors. With ``single`` the LU
+    is in single precision and the tangent refined (:func:`_tangent`); where that does
+    not converge, ``fallback`` ``(N + 1,)`` stands in for it (the chord from the last
+    point, a tangent from double factors)."""
     t, factors, ok = _tangent(param, y, lam, ty, tlam, single)
     if single:
-        t = jax.lax.cond(ok, lambda: t, lambda: _tangent(param, y, lam, ty, tlam, False)[0])
+        t = jnp.where(ok, t, fallback)
     t = t / jnp.linalg.norm(t)
     return t[:-1], t[-1], factors
 
@@ -249,7 +251,8 @@ def start(param: AbstractParameter, y, lam, direction, settings: Settings) -> Ar
     """State at a converged point, tangent pointing to increasing ``lam`` if ``direction > 0``."""
     lam = jnp.asarray(lam, float)
     ty, tlam = tangent(param, y, lam, jnp.zeros_like(y), jnp.sign(direction) * 1.0)
-    ty, tlam, factors = tangent_factors(param, y, lam, ty, tlam, settings.single)
+    ty, tlam, factors = tangent_factors(param, y, lam, ty, tlam, settings.single,
+                                        fallback=jnp.append(ty, tlam))
     return ArcState(y=y, lam=lam, ty=ty, tlam=tlam,
                     h=jnp.asarray(settings.step, float), accepted=jnp.asarray(True),
                     fold=jnp.asarray(False), fold_lam=jnp.asarray(jnp.nan, float),
@@ -328,13 +331,10 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
     y, lam, k, converged = c.y, c.lam, c.k, c.converged
 
     def new_tangent(_):
-        t, factors, ok = _tangent(param, y, lam, state.ty, state.tlam, settings.single)
         # where the tangent from single-precision factors does not converge (a nearly
         # singular Jacobian), the chord from the last point stands in for it
         chord = jnp.concatenate([y - state.y, (lam - state.lam)[None]])
-        t = jnp.where(ok, t, chord)
-        t = t / jnp.linalg.norm(t)
-        return t[:-1], t[-1], factors
+        return tangent_factors(param, y, lam, state.ty, state.tlam, settings.single, chord)
 
     def old_tangent(_):
         return state.ty, state.tlam, state.factors

@@ -550,7 +550,8 @@ def _arc_state(param, y, lam, ty, tlam, h, ty_before, tlam_before, single):
     and next step ``h``: as ``arclength_step`` leaves it, with the bordered Jacobian
     factorised with the tangent of the point before in its last row (the corrector
     of the next step reuses those factors)."""
-    factors = _continuation.tangent_factors(param, y, lam, ty_before, tlam_before, single)[2]
+    factors = _continuation.tangent_factors(param, y, lam, ty_before, tlam_before, single,
+                                            fallback=jnp.append(ty, tlam))[2]
     return _continuation.ArcState(
         y=y, lam=lam, ty=ty, tlam=tlam, h=h, accepted=jnp.asarray(True),
         fold=jnp.asarray(False), fold_lam=jnp.asarray(jnp.nan, float), steps=jnp.asarray(0),
@@ -811,7 +812,8 @@ def _signature(args) -> tuple:
     """What a jitted function's compilation depends on, of arguments ``args``: the tree
     structure (with the static fields) and every leaf's shape and type."""
     leaves, tree = jax.tree.flatten(args)
-    return tree, tuple((np.shape(a), np.result_type(a)) for a in leaves)
+    return tree, tuple((np.shape(a), str(getattr(a, "dtype", type(a).__name__)))
+                       for a in leaves)
 
 
 def bifurcations(f_hz, stable, multipliers, excluded, branch=None) -> list[dict]:
