@@ -235,6 +235,8 @@ def tangent_factors(param: AbstractParameter, y, lam, ty, tlam, single: bool = F
     is in single precision and the tangent refined (:func:`_tangent`); where that does
     not converge, ``fallback`` ``(N + 1,)`` stands in for it (the chord from the last
     point, a tangent from double factors)."""
+    if single and fallback is None:
+        raise ValueError("tangent_factors with single=True needs a fallback tangent")
     t, factors, ok = _tangent(param, y, lam, ty, tlam, single)
     if single:
         t = jnp.where(ok, t, fallback)

@@ -790,10 +790,11 @@ def _point_rows(problem, Xs, omegas, results, F_static):
         return jax.device_get((resp, _batch_verdict(problem, basis, mu, V)))
 
     starts = range(0, P + pad, size)
-    # the first call of a signature compiles: alone, before the threads call it
     key = _signature((problem, basis, Xs[:size], omegas_p[:size], F_static))
-    parts = [] if key in _POST_COMPILED else [chunk(starts[0])]
-    _POST_COMPILED.add(key)
+    parts = []
+    if key not in _POST_COMPILED:  # the first call compiles: alone, before the threads
+        parts.append(chunk(starts[0]))
+        _POST_COMPILED.add(key)
     with concurrent.futures.ThreadPoolExecutor(min(post_threads(), len(starts))) as pool:
         parts += list(pool.map(chunk, starts[len(parts):]))
     resp, stab = jax.tree.map(lambda *a: np.concatenate(a)[:P], *parts)
