@@ -242,9 +242,11 @@ def _contact_intervals(p0, p1, dp0, dp1, h, b):
     r_max = jnp.where(a2 <= 0, ratio(m0, d - a2, -1.0), ratio(-a2 - d, 3 * a3, -1.0))
     r_min = jnp.where(a2 >= 0, ratio(m0, -a2 - d, -1.0), ratio(d - a2, 3 * a3, -1.0))
     inside = lambda r: (disc > 0) & (r > 0.0) & (r < 1.0)  # noqa: E731
-    split = jnp.where(inside(r_max) & (cubic(r_max)[0] > b), r_max,
-                      jnp.where(inside(r_min) & (cubic(r_min)[0] < b), r_min, 1.0))
-    q_split = cubic(split)[0]
+    q_max, q_min = cubic(r_max)[0], cubic(r_min)[0]
+    at_max = inside(r_max) & (q_max > b)
+    at_min = ~at_max & inside(r_min) & (q_min < b)
+    split = jnp.where(at_max, r_max, jnp.where(at_min, r_min, 1.0))
+    q_split = jnp.where(at_max, q_max, jnp.where(at_min, q_min, q1))
     u, v = [], []
     for s0, s1, Q0, Q1 in ((0.0, split, q0, q_split), (split, 1.0, q_split, q1)):
         # contact on [r, s1] (rising) or [s0, r] (falling), r the switch, or a part's end
