@@ -406,3 +406,35 @@ def test_magnus_exponent_blocks_equal_the_full_commutator(contact_damping):
     expected = A0 + (A1 @ A0 - A0 @ A1) / h
     np.testing.assert_allclose(_stability._magnus_exponent(D, D1, S, S1, h, ws), expected,
                                rtol=1e-13, atol=1e-13)
+
+
+def test_expm_taylor_18_in_five_products():
+    """The five-product scheme is the Taylor polynomial of degree 18 (its coefficients, by
+    polynomial arithmetic, equal 1/k! to round-off), and ``_expm`` with scaling and squaring
+    matches scipy's Pade ``expm`` on batches of oscillator-like matrices (a dominant
+    skew part, as the step exponents) from no squaring (norm 0.5) to five (norm 30)."""
+    P = np.polynomial.polynomial
+    powers = (0, 1, 2, 3, 6)
+
+    def poly(coef):
+        out = np.zeros(7)
+        out[list(powers[:len(coef)])] = coef
+        return out
+
+    q31 = poly(_stability._EXPM_A)
+    q61, q62, q63, q64 = (poly(c) for c in _stability._EXPM_B)
+    q91 = P.polyadd(P.polymul(q31, q64), q63)
+    t18 = P.polyadd(q61, P.polymul(P.polyadd(q62, q91), q91))
+    taylor = 1.0 / np.array([float(np.prod(np.arange(1, k + 1))) for k in range(19)])
+    assert t18.size == 19
+    np.testing.assert_allclose(t18, taylor, rtol=1e-15)
+    rng = np.random.default_rng(5)
+    expm = jax.jit(_stability._expm)
+    for norm in (0.5, 1.13, 2.3, 4.5, 30.0):
+        A = rng.standard_normal((8, 28, 28))
+        A = 0.1 * A - 2 * (A - np.swapaxes(A, 1, 2))
+        A *= norm / np.max(np.abs(A).sum(axis=1), axis=-1)[:, None, None]
+        E = np.asarray(expm(jnp.asarray(A)))
+        for a, e in zip(A, E):
+            ref = scipy.linalg.expm(a)
+            assert np.abs(e - ref).sum(axis=0).max() < 2e-14 * np.abs(ref).sum(axis=0).max()
