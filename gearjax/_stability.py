@@ -360,7 +360,7 @@ degree 18 is below ``1.13^19 / 19! < 1e-16``."""
 
 # Taylor polynomial of degree 18 in five matrix products (Bader, Blanes & Casas,
 # "Computing the matrix exponential with an optimized Taylor polynomial approximation",
-# Mathematics 7 (2019) 1174, section 4, the coefficients that minimise their 1-norm):
+# Mathematics 7 (2019) 1174, their degree-18 scheme):
 # q31 = sum_i _EXPM_A[i] A^i (i = 0..3), q6j = sum_i _EXPM_B[j][i] A^i (i = 0, 1, 2, 3, 6),
 # q91 = q31 q64 + q63, T18 = q61 + (q62 + q91) q91. Its 19 coefficients equal 1/k! to
 # 4e-16 relative (tests/test_stability.py).
@@ -386,7 +386,7 @@ def _expm(A):
     polynomial takes 5 products (:data:`_EXPM_B`), where degree 16 in Paterson-Stockmeyer
     form took 6 and needed ``||A||_1 <= 0.8``; the number of squarings
     is per matrix, ``ceil(log2(||A||_1 / 1.13))``. On the paper sweep ``||A||_1`` is about
-    ``h w_s``, 1.2 to 4.5: two squarings or fewer, against three at 0.8.
+    ``h w_s``, 1.2 to 4.5: at most two squarings, against up to three at 0.8.
     """
     norm = jnp.max(jnp.sum(jnp.abs(A), axis=-2), axis=-1)
     s = jnp.maximum(0, jnp.ceil(jnp.log2(jnp.maximum(norm, 1e-300) / _THETA))).astype(int)
