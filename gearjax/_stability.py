@@ -75,11 +75,14 @@ multipliers depend on that depth like its square root (the contact time), so a v
 shallow graze costs accuracy (test: the clearance oscillator with a contact half a step
 long, 1.3e-6 deep against an amplitude of 0.33: 6e-5 at the default step; missed,
 6.5e-2). Measured
-over the 841 points of the paper's backlash sweep (2-15 kHz, ``K`` = 64 / 48 / 32,
+over the 843 points of the paper's backlash sweep (2-15 kHz, ``K`` = 64 / 48 / 32,
 2048 / 2048 / 1024 steps) against four times the steps: largest ``|mu|`` within
 3.4e-4 / 3e-6 / 7.6e-4 relative, within 1.0e-4 where ``|mu|`` is within 1e-2 of 1;
 before the sub-step switches (a chord and one Newton step per step), 2.4e-3 and
-3.8e-3: a 0.5-step contact of the stage-2 meshes at the 6656 Hz fold was missed.
+3.8e-3: a 0.5-step contact of the stage-2 meshes at the 6656 Hz fold was missed. A
+sweep takes half these steps (16 per period of the highest harmonic,
+``_sweep.SWEEP_FLOQUET_STEPS``): the error that adds is below the one the truncation of
+the orbit at ``K`` puts into the multipliers.
 
 **Hill's method (a cross-check).** With ``dz = exp(s t) q(tau)``, ``q`` periodic,
 ``d/dt`` becomes ``s + omega_0 D`` on the harmonic coefficients, and the harmonic-
@@ -134,11 +137,13 @@ cores, 27 ms a point at K = 64 and 13 ms at K = 32, against 54 and 18 ms with 64
 # ------------------------------------------------------------------------ helpers
 
 
-def floquet_steps(problem: HBProblem) -> int:
-    """Default number of steps per period (static, a power of two): see the module docstring."""
+def floquet_steps(problem: HBProblem, per_harmonic: int = 32) -> int:
+    """Default number of steps per period (static, a power of two): at least
+    ``per_harmonic`` per period of the highest harmonic, and 256; see the module
+    docstring (a sweep takes 16, ``_sweep.SWEEP_FLOQUET_STEPS``)."""
     K, eta = problem.settings.n_harmonics, problem.settings.eta
     top = max(K, highest_excitation(problem.system, eta), 1)
-    need = max(256, 32 * top)
+    need = max(256, per_harmonic * top)
     return int(2 ** int(np.ceil(np.log2(need))))
 
 
@@ -633,11 +638,13 @@ def verdict_basis(problem: HBProblem) -> VerdictBasis:
     return VerdictBasis(frame=_frame(problem), modal=modal, rigid=rigid)
 
 
-def scaled_monodromy(problem: HBProblem, basis: VerdictBasis, X: Array, omega) -> Array:
+def scaled_monodromy(problem: HBProblem, basis: VerdictBasis, X: Array, omega,
+                     n_steps: int | None = None) -> Array:
     """Monodromy matrix ``(2n, 2n)`` of one solution in the scaled coordinates of
-    ``basis.frame`` (default steps; no LAPACK call): its eigenvalues are the Floquet
-    multipliers, its eigenvalues and eigenvectors the input of :func:`verdict`."""
-    return _monodromy_scaled(problem, X, omega, None, basis.frame)[0]
+    ``basis.frame`` (``n_steps`` static, default :func:`floquet_steps`; no LAPACK call):
+    its eigenvalues are the Floquet multipliers, its eigenvalues and eigenvectors the
+    input of :func:`verdict`."""
+    return _monodromy_scaled(problem, X, omega, n_steps, basis.frame)[0]
 
 
 def verdict(problem: HBProblem, basis: VerdictBasis, mu, V, tol=1e-6) -> Stability:

@@ -358,7 +358,7 @@ def test_attractor_past_the_fold_is_stable_whatever_its_rigid_pair(paper_system)
 def test_sweep_post_processing_in_threads_matches_stability(paper_system):
     """The sweep's responses and stability run in threads, a chunk of points per compiled
     call, with the eigenvalues from NumPy: the same verdict as :func:`gj.stability` point
-    by point, and no LAPACK call in the threaded programs (jaxlib 0.10's CPU LAPACK
+    by point (with the sweep's Floquet steps), and no LAPACK call in the threaded programs (jaxlib 0.10's CPU LAPACK
     kernels can deadlock XLA's thread pool when several run at once)."""
     problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=16))
     # 2 chunks, one padded; the linear orbits are unstable in the parametric instability
@@ -367,8 +367,10 @@ def test_sweep_post_processing_in_threads_matches_stability(paper_system):
                     for w in omegas])
     F_static = _sweep.static_mesh_forces(paper_system)
     rows = _sweep._point_rows(problem, Xs, jnp.asarray(omegas), np.zeros(11, int), F_static)
+    n_steps = _stability.floquet_steps(problem, _sweep.SWEEP_FLOQUET_STEPS)  # half the default
+    assert 2 * n_steps == _stability.floquet_steps(problem)
     for i, w in enumerate(omegas):
-        st = stability(problem, Xs[i], float(w))
+        st = stability(problem, Xs[i], float(w), n_steps=n_steps)
         assert matched_error(rows["multipliers"][i], st.multipliers) < 1e-10
         assert rows["stable"][i] == bool(st.stable)
         np.testing.assert_allclose(rows["max_multiplier"][i], float(st.max_abs), rtol=1e-10)
