@@ -234,6 +234,10 @@ def test_clearance_oscillator_impacting_solution():
     # error 2.8e-6 at 256 steps, 2.7e-8 at 1024: third order (the switching steps)
     assert matched_error(st.multipliers, mu_ref) < 1e-7
     assert matched_error(st.multipliers, mu_ref) < matched_error(coarse, mu_ref) / 30
+    # a sweep's steps (512 here): third order between 256 and 1024
+    sweep_steps = _stability.floquet_steps(problem, _sweep.SWEEP_FLOQUET_STEPS)
+    assert sweep_steps == 512
+    assert matched_error(floquet(problem, sol.X, omega, n_steps=sweep_steps), mu_ref) < 1e-6
     assert bool(st.stable) and float(st.max_abs) == pytest.approx(0.6578, abs=1e-3)
     # the true periodic orbit of the non-linear system: HB (K = 32) error included
     assert matched_error(st.multipliers, np.linalg.eigvals(shooting_reference(sol.X, omega))) < 1e-4
@@ -358,8 +362,9 @@ def test_attractor_past_the_fold_is_stable_whatever_its_rigid_pair(paper_system)
 def test_sweep_post_processing_in_threads_matches_stability(paper_system):
     """The sweep's responses and stability run in threads, a chunk of points per compiled
     call, with the eigenvalues from NumPy: the same verdict as :func:`gj.stability` point
-    by point (with the sweep's Floquet steps), and no LAPACK call in the threaded programs (jaxlib 0.10's CPU LAPACK
-    kernels can deadlock XLA's thread pool when several run at once)."""
+    by point (with the sweep's Floquet steps), and no LAPACK call in the threaded
+    programs (jaxlib 0.10's CPU LAPACK kernels can deadlock XLA's thread pool when
+    several run at once)."""
     problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=16))
     # 2 chunks, one padded; the linear orbits are unstable in the parametric instability
     omegas = 2 * np.pi * np.r_[np.linspace(2500.0, 4000.0, 6), np.linspace(6700, 6880, 5)] / 7
