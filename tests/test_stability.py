@@ -391,6 +391,33 @@ def test_sweep_post_processing_in_threads_matches_stability(paper_system):
         assert "lapack" not in program.as_text().lower()
 
 
+def test_sweep_post_processing_streamed_equals_batch(paper_system):
+    """A sweep post-processes full chunks of a segment's points in a background thread as
+    the continuation finds them (``_sweep._PostStream``) and the rest at the end: the
+    rows equal those of the whole segment at once, bit for bit, however the points came
+    in (here 3 at a time, 11 points: one chunk streamed, one padded at the end)."""
+    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=16))
+    omegas = 2 * np.pi * np.r_[np.linspace(2500.0, 4000.0, 6), np.linspace(6700, 6880, 5)] / 7
+    ys = [_hb.linear_guess(problem, w) for w in omegas]
+    pts = [{"y": np.asarray(y), "lam": float(w) / 2.0} for y, w in zip(ys, omegas)]
+    F_static = _sweep.static_mesh_forces(paper_system)
+    Xs = jnp.stack([y.reshape(problem.shape) * problem.x_scale for y in ys])
+    batch = _sweep._point_rows(problem, Xs, jnp.asarray(omegas), np.zeros(11, int), F_static)
+    post = _sweep._PostStream(F_static)
+    try:
+        for n in range(3, 12, 3):
+            post.feed(0, problem, 2.0, pts[:n])
+        assert len(post._chunks[0]) == 1  # the first 8 points, submitted while feeding
+        rows = post.rows(0, problem, 2.0, pts)
+    finally:
+        post.close()
+    np.testing.assert_array_equal(rows["omega"], batch["omega"])
+    for key in ("stable", "max_multiplier", "multipliers", "excluded", "K"):
+        np.testing.assert_array_equal(rows[key], batch[key], err_msg=key)
+    for a, b in zip(jax.tree.leaves(rows["responses"]), jax.tree.leaves(batch["responses"])):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_step_count_must_be_a_power_of_two():
     problem = _hb.hb_problem(oscillator(clearance=1.0), SETTINGS)
     X = jnp.zeros(problem.shape)

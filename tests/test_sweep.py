@@ -3,11 +3,14 @@
 import dataclasses
 import json
 import math
+import threading
+import time
 import warnings
 
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import threadpoolctl
 
 import gearjax as gj
 from gearjax import _sweep
@@ -110,6 +113,40 @@ def test_nonlinear_sweep_keeps_mean_load_and_reports_stability(train):
             np.testing.assert_allclose(mean, ds["static_force"].values[cols].sum(), rtol=1e-3)
     f = ds["mesh_frequency_hz"].values  # --max-step bounds the predictor; the corrector
     assert np.all(np.diff(f) <= 1.05 * 20)  # moves the frequency by a few percent of it
+
+
+def blas_threads() -> set[int]:
+    return {i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"}
+
+
+def test_continuation_runs_blas_on_all_cores_but_one_and_restores_it(train):
+    """While a continuation sweep runs, BLAS keeps one core free for the post-processing
+    thread (``_sweep._blas_threads``); the limits come back after it, also when the sweep
+    is interrupted, and the post-processing thread stops then."""
+    before = blas_threads()
+    during = []
+
+    def progress(n, f_hz):
+        during.append(blas_threads())
+        if n == 12:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        _sweep.sweep(train, "first", 2400, 2550, harmonics=8, max_step_hz=5, progress=progress)
+    assert len(during) == 12
+    assert all(d == {max(1, _sweep.post_threads() - 1)} for d in during)
+    assert blas_threads() == before
+    assert not any(t.name.startswith("gearjax-post") and t.is_alive() for t in
+                   _wait_for_post_threads())
+
+
+def _wait_for_post_threads(timeout=10.0):
+    """Live threads after the post-processing threads had ``timeout`` s to finish."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and any(
+            t.name.startswith("gearjax-post") for t in threading.enumerate()):
+        time.sleep(0.05)
+    return threading.enumerate()
 
 
 def test_start_past_the_fold_by_time_integration(train):
