@@ -3,7 +3,8 @@
 Runs ``gearjax.sweep`` over a band of stage-1 mesh frequency (default the paper's
 2-15 kHz, Figs 4-6) twice and prints, per sweep: points, the first run's wall time and
 the part of it spent compiling (JAX's compile-duration events: tracing, lowering, XLA),
-the second run's (everything compiled: the time after compile) and its time per point, harmonics per segment, the folds and stability changes
+the second run's (everything compiled: the time after compile) and its time per point,
+harmonics per segment, the folds and stability changes
 located, the largest RMS mesh force of each stage and where, the largest separation
 and back-contact shares, and the mean-force check (per stage and side, the sum over
 planets of the mean mesh force against the static one: equilibrium of the mean fixes
