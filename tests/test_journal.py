@@ -167,6 +167,39 @@ def test_resumed_sweep_equals_the_uninterrupted_one(train, full, tmp_path, keep)
     assert path.read_bytes() == data  # nothing lost, nothing written twice
 
 
+TWO_SEGMENTS = [(2400.0, 2425.0, 8), (2425.0, 2450.0, 8)]
+
+
+@pytest.fixture(scope="module")
+def two_segments(train, tmp_path_factory):
+    """The short sweep cut in two segments, whose second is speculated
+    (``_sweep._Speculation``) and adopted: the result and its whole journal."""
+    path = tmp_path_factory.mktemp("two") / "sweep.nc.journal"
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(_sweep, "_segments", lambda *a: list(TWO_SEGMENTS))
+        result = _sweep.sweep(train, "first", journal=path, **BAND)
+    return result, path.read_bytes()
+
+
+@pytest.mark.parametrize("keep", [3, 8, 10])
+def test_resumed_speculation_equals_the_uninterrupted_one(train, two_segments, tmp_path,
+                                                          monkeypatch, keep):
+    """Interrupted in the first segment (the speculation on the second starts again and
+    is adopted: in a thread), after it (adopted at once, without a thread), in the
+    second (its adopted points taken from the journal, the rest continued)."""
+    result, data = two_segments
+    monkeypatch.setattr(_sweep, "_segments", lambda *a: list(TWO_SEGMENTS))
+    lines = records(data)
+    assert 1 + keep < len(lines) - 1
+    segments = [json.loads(line.split(b" ", 1)[1]).get("segment") for line in lines[1:]]
+    assert segments[keep - 1] == (0 if keep <= 8 else 1)  # where it was interrupted
+    path = tmp_path / "sweep.nc.journal"
+    path.write_bytes(b"".join(lines[:1 + keep]))
+    resumed = _sweep.sweep(train, "first", journal=path, resume=True, **BAND)
+    same_results(resumed.dataset, result.dataset)
+    assert path.read_bytes() == data
+
+
 def test_a_finished_journal_is_not_recomputed(train, full, tmp_path, monkeypatch):
     result, data = full
     path = tmp_path / "sweep.nc.journal"

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import threadpoolctl
+import xarray as xr
 
 import gearjax as gj
 from gearjax import _sweep
@@ -113,6 +114,63 @@ def test_nonlinear_sweep_keeps_mean_load_and_reports_stability(train):
             np.testing.assert_allclose(mean, ds["static_force"].values[cols].sum(), rtol=1e-3)
     f = ds["mesh_frequency_hz"].values  # --max-step bounds the predictor; the corrector
     assert np.all(np.diff(f) <= 1.05 * 20)  # moves the frequency by a few percent of it
+
+
+TWO_SEGMENTS = [(2400.0, 2475.0, 16), (2475.0, 2550.0, 16)]
+
+
+def test_last_segment_speculated_in_a_thread_as_without_one(train, monkeypatch):
+    """The band of the test above cut in two segments: the second is continued in a
+    thread from its own start while the first runs, and adopted, since the branch
+    arriving from the first enters it on the same orbit. The result is that of the same
+    walk without a thread (one core), to the last bit, and starts the second segment on
+    its boundary. Where the orbits are taken as different the speculation is called off
+    and the walk goes on from the start it found, the same orbit within Newton's
+    tolerance: the same points to 1e-7."""
+    monkeypatch.setattr(_sweep, "_segments", lambda *a: list(TWO_SEGMENTS))
+    adopted, names = [], set()
+    real_adopt, real_walk = _sweep._Speculation.adopt, _sweep._walk_segment
+
+    def adopt(self, *args):
+        adopted.append(real_adopt(self, *args))
+        return adopted[-1]
+
+    def walk(*args, **kwargs):
+        names.add(threading.current_thread().name)
+        return real_walk(*args, **kwargs)
+
+    monkeypatch.setattr(_sweep._Speculation, "adopt", adopt)
+    monkeypatch.setattr(_sweep, "_walk_segment", walk)
+    kw = dict(harmonics=16, max_step_hz=20)
+    threaded = _sweep.sweep(train, "first", 2400, 2550, **kw)
+    assert adopted == [True]
+    assert ("gearjax-speculation" in names) == (_sweep.post_threads() > 1)
+    cores = _sweep.post_threads
+    monkeypatch.setattr(_sweep, "post_threads", lambda: 1)
+    names.clear()
+    inline = _sweep.sweep(train, "first", 2400, 2550, **kw)
+    assert adopted == [True, True] and names == {"MainThread"}
+    a, b = threaded.dataset.copy(), inline.dataset.copy()
+    for ds in (a, b):
+        ds.attrs.pop("created", None)
+        ds.attrs.pop("command", None)
+    xr.testing.assert_identical(a, b)
+    f = a["mesh_frequency_hz"].values
+    assert np.sum(np.isclose(f, 2475.0, rtol=0, atol=1e-9)) == 1
+    assert np.all(np.diff(f) > 0) and np.all(a["branch"].values == 0)
+
+    monkeypatch.setattr(_sweep, "post_threads", cores)
+    monkeypatch.setattr(_sweep, "SAME_ORBIT", -1.0)
+    own = _sweep.sweep(train, "first", 2400, 2550, **kw).dataset
+    assert adopted[-1] is False
+    assert own.sizes["point"] == a.sizes["point"]
+    np.testing.assert_allclose(own["mesh_frequency_hz"].values, f, rtol=1e-7)
+    np.testing.assert_allclose(own["rms_force"].values, a["rms_force"].values, rtol=1e-7)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(
+            t.name == "gearjax-speculation" for t in threading.enumerate()):
+        time.sleep(0.05)
+    assert not any(t.name == "gearjax-speculation" for t in threading.enumerate())
 
 
 def blas_threads() -> set[int]:
