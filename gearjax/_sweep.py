@@ -208,7 +208,6 @@ def sweep(
     if harmonics is not None and harmonics < 1:
         raise fail("command line", "--harmonics", harmonics, "must be an integer >= 1")
 
-    to_omega = lambda f: 2 * math.pi * f / mu_ref  # noqa: E731  base frequency, rad/s
     min_k = _hb.highest_excitation(system, eta)
     segments = _segments(from_hz, to_hz, mu_ref, min_k, eta, harmonics)
     F_static = static_mesh_forces(system)
@@ -230,9 +229,8 @@ def sweep(
     log = _SweepLog.open(journal, run, resume)
     post = _PostStream(F_static)
     blas = None if linear else _blas_threads()  # a linear sweep's post-processing is after
-    omega_ref = to_omega(from_hz)  # continuation parameter: lambda = Omega / omega_ref
-    ctx = _Context(system=system, eta=eta, smoothing=smoothing, omega_ref=omega_ref,
-                   from_hz=from_hz, to_hz=to_hz, mu_ref=mu_ref, max_step_hz=max_step_hz,
+    ctx = _Context(system=system, eta=eta, smoothing=smoothing, from_hz=from_hz,
+                   to_hz=to_hz, mu_ref=mu_ref, max_step_hz=max_step_hz,
                    max_points=max_points, max_detour=max_detour, runaway=runaway)
     walk = _Walk(segments=list(segments))
     spec = None
@@ -272,9 +270,7 @@ def sweep(
         branch += j in fresh and j > 0
         if last <= 0:
             continue
-        seg = post.rows(j, problem, omega_ref, pts)
-        rows.append({k: (jax.tree.map(lambda a: a[:last], v) if k == "responses" else v[:last])
-                     for k, v in seg.items()})
+        rows.append(post.rows(j, problem, ctx.omega_ref, pts[:last]))
         rows[-1]["branch"] = np.full(last, branch)
     post.close()
     if not rows:
@@ -333,14 +329,12 @@ def _reference_stage(train, kin, stage):
 @dataclasses.dataclass(frozen=True)
 class _Context:
     """What every segment of a sweep shares: the ``system`` and harmonic-balance settings,
-    the continuation parameter's reference ``omega_ref`` (rad/s, ``lambda = Omega /
-    omega_ref``), the band and reference stage's ``mu_ref``, the caps, and the
-    ``runaway`` deflection limits ``(m,)`` (m)."""
+    the band and reference stage's ``mu_ref``, the caps, and the ``runaway`` deflection
+    limits ``(m,)`` (m); one harmonic-balance problem per K, built once."""
 
     system: object
     eta: int
     smoothing: float
-    omega_ref: float
     from_hz: float
     to_hz: float
     mu_ref: float
@@ -348,14 +342,25 @@ class _Context:
     max_points: int
     max_detour: int
     runaway: np.ndarray
+    _problems: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)
 
-    def problem(self, K: int):
-        return _hb.hb_problem(self.system, _hb.HarmonicBalance(
-            n_harmonics=K, eta=self.eta, smoothing=self.smoothing))
+    def problem(self, K: int) -> _hb.HBProblem:
+        """The harmonic-balance problem with ``K`` harmonics (the same object for every
+        segment of that K, in either thread)."""
+        if K not in self._problems:
+            self._problems[K] = _hb.hb_problem(self.system, _hb.HarmonicBalance(
+                n_harmonics=K, eta=self.eta, smoothing=self.smoothing))
+        return self._problems[K]
 
     def omega(self, f_hz: float) -> float:
         """Base frequency (rad/s) at reference-stage mesh frequency ``f_hz``."""
         return 2 * math.pi * f_hz / self.mu_ref
+
+    @property
+    def omega_ref(self) -> float:
+        """The continuation parameter's reference (rad/s): ``lambda = Omega / omega_ref``,
+        1 at the start of the band."""
+        return self.omega(self.from_hz)
 
     def lam(self, f_hz: float) -> float:
         return self.omega(f_hz) / self.omega_ref
@@ -383,6 +388,11 @@ class _Walk:
     furthest: tuple | None = None
     failed: int = 0
     done: int = 0
+
+    def handover(self, j: int) -> tuple:
+        """``(previous, guess)`` for :func:`_enter_segment` at segment ``j``: the branch
+        continued, or a fresh one's first guess."""
+        return (None, self.furthest) if j in self.fresh else (self.previous, None)
 
 
 def _linear_segments(ctx, walk, log, points, progress) -> None:
@@ -431,12 +441,13 @@ def _walk_segment(ctx, walk, log, post, *, progress=None, entered=None, key=None
             post.feed(name, problem, omega_ref, log.points(j))
 
         start = walk.done
+        previous, guess = walk.handover(j)
         seg_stop = _continue_segment(
-            log, j, K, param, None if j in walk.fresh else walk.previous, ctx.lam(f_a),
+            log, j, K, param, previous, ctx.lam(f_a),
             ctx.lam(f_b), _settings(ctx.max_step_hz, ctx.to_hz - ctx.from_hz, ctx.from_hz,
                                     ctx.mu_ref),
             cap=ctx.max_points - walk.done, f_a=f_a, f_ref=ctx.from_hz,
-            guess=walk.furthest if j in walk.fresh else None, runaway=ctx.runaway,
+            guess=guess, runaway=ctx.runaway,
             max_detour=ctx.max_detour, entered=entered, found=found,
             progress=(lambda i, lam: progress(start + i + 1, lam * ctx.from_hz))
             if progress else None)
@@ -564,7 +575,7 @@ class _Speculation:
         """Call it off and drop its chunks. The thread stops at its next point or
         segment, not inside a restart's start (a time integration, a homotopy)."""
         self._cancel.set()
-        for j in range(len(list(self.walk.segments))):
+        for j in range(len(self.walk.segments)):
             self.post.drop(self._key(j))
 
     def adopt(self, walk, entered, log) -> bool:
@@ -623,12 +634,8 @@ def _speculate(ctx, walk, log, post, spec, last):
     if j != target or log.points(j):
         return None, spec
     f_a, _, K = last
-    problem = ctx.problem(K)
-    param = _continuation.FrequencyParameter(problem=problem,
-                                             omega_ref=jnp.asarray(ctx.omega_ref))
-    entered = _enter_segment(problem, param, None if j in walk.fresh else walk.previous,
-                             ctx.lam(f_a), ctx.omega_ref,
-                             walk.furthest if j in walk.fresh else None)
+    previous, guess = walk.handover(j)
+    entered = _enter_segment(ctx.problem(K), previous, ctx.lam(f_a), ctx.omega_ref, guess)
     spec = spec or _Speculation(ctx, last, post)
     adopted = spec.adopt(walk, entered, log)
     return (None if adopted else entered), None
@@ -761,7 +768,7 @@ def _continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap
         return "detour" if detour(lam) and (lam - lam_b) * direction < 0 else None
 
     if not have:
-        y, code, lam = entered or _enter_segment(param.problem, param, previous, lam_a,
+        y, code, lam = entered or _enter_segment(param.problem, previous, lam_a,
                                                  float(param.omega_ref), guess)
         if code != _hb.CONVERGED:
             return f"no converged start at {f_a:.1f} Hz ({_hb.RESULTS[code]})"
@@ -910,7 +917,7 @@ def _linear_points(problem, omegas):
     return jax.lax.map(lambda w: _hb.solve_linear(problem, w), omegas)
 
 
-def _enter_segment(problem, param, previous, lam, omega_ref, guess=None):
+def _enter_segment(problem, previous, lam, omega_ref, guess=None):
     """``(y, result code, lambda)``: scaled unknowns with this segment's harmonics,
     converged at ``lambda``, where the segment starts.
 
