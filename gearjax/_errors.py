@@ -9,14 +9,33 @@ class TrainError(ValueError):
     """Impossible train input. The message is one line: ``FILE: FIELD = VALUE: RULE``."""
 
 
-class GeometryWarning(UserWarning):
+class TrainWarning(UserWarning):
+    """Train input that is possible but unusual (data kept as given). The message is one
+    line naming file, field, value and the rule or usual range, with the numbers; the CLI
+    prints every ``TrainWarning`` on stderr as ``warning: ...``."""
+
+
+class GeometryWarning(TrainWarning):
     """Geometry rules of standard gears that a train breaks (data kept as given)."""
+
+
+class RangeWarning(TrainWarning):
+    """A value outside the range of ordinary gears, or a stiffness that does not do its job
+    (a brake not much stiffer than what it holds), but not impossible (data kept as given)."""
 
 
 def field_message(source: str | None, field: str, value, rule: str) -> str:
     """``FILE: FIELD = VALUE: RULE`` on one line."""
     where = source if source is not None else "<train>"
-    return f"{where}: {field} = {_show(value)}: {rule}"
+    return one_line(f"{where}: {field} = {_show(value)}: {rule}")
+
+
+def one_line(text: str) -> str:
+    """``text`` with line breaks and other unprintable characters escaped (``\\n``), so a
+    message stays one line whatever a file name, key or stage id holds."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def fail(source: str | None, field: str, value, rule: str) -> TrainError:
@@ -26,6 +45,10 @@ def fail(source: str | None, field: str, value, rule: str) -> TrainError:
 
 def warn_geometry(message: str) -> None:
     warnings.warn(message, GeometryWarning, stacklevel=3)
+
+
+def warn_range(message: str) -> None:
+    warnings.warn(message, RangeWarning, stacklevel=3)
 
 
 def _show(value) -> str:

@@ -1,8 +1,10 @@
 """Train files: TOML in (with field-by-field checks) and TOML out (round trip).
 
-Reading checks every key's type and value as it goes and names the file, field,
-value and rule of the first thing that is wrong; whole-train rules (member paths,
-kinematics, planet overlap) and geometry warnings live in ``_validate``.
+Reading checks every key's type and sign as it goes and names the file, field,
+value and rule of the first thing that is wrong, then every value's bounds
+(``_validate.check_ranges``); whole-train rules (member paths, kinematics, planet
+overlap) and the geometry and range warnings live in ``_validate``. A file that cannot
+be read (missing, a directory, not UTF-8, not TOML) is refused the same way.
 """
 
 from __future__ import annotations
@@ -54,23 +56,56 @@ def load_train(path: str | Path | None = None, *, validate: bool = True) -> Trai
     """Read and check a train file; ``None`` reads the bundled paper case.
 
     **Raises:** ``TrainError`` (a ``ValueError``) with one line naming file, field,
-    value and rule. Geometry rules that published data break are warnings
-    (``GeometryWarning``), not errors.
+    value and rule, also for a file that cannot be read or is not UTF-8 TOML. Geometry
+    rules that published data break, and unusual values, are warnings
+    (``GeometryWarning``, ``RangeWarning``: both ``TrainWarning``), not errors.
     """
     path = bundled_example_path() if path is None else Path(path)
+    source = str(path)
     try:
-        text = path.read_text()
+        data = path.read_bytes()
     except OSError as e:
-        raise fail(str(path), "file", str(path), f"cannot be read ({e.strerror})") from None
-    return loads_train(text, source=str(path), validate=validate)
+        reason = e.strerror or type(e).__name__
+        raise fail(source, "file", source, f"cannot be read ({reason})") from None
+    return loads_train(_decode(data, source), source=source, validate=validate)
+
+
+def _decode(data: bytes, source: str) -> str:
+    """UTF-8 text of a train file; a UTF-8 byte-order mark (Windows editors) is dropped."""
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise fail(source, "file", source,
+                   "is UTF-16 text (it starts with a UTF-16 byte-order mark); a train file is "
+                   "TOML and must be saved as UTF-8")
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        raise fail(source, "file", source,
+                   f"contains NUL bytes (the first at offset {nul}): a binary file, "
+                   "or UTF-16 text without a byte-order mark; a train file is TOML and must be "
+                   "saved as UTF-8")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        raise fail(source, "file", source,
+                   f"is not UTF-8 text (byte 0x{data[e.start]:02x} at offset {e.start}, line "
+                   f"{line}); a train file is TOML and must be saved as UTF-8") from None
 
 
 def loads_train(text: str, source: str | None = None, *, validate: bool = True) -> Train:
     """Parse train-file text. ``source`` names it in messages and sets the default name."""
+    if text.startswith("\ufeff"):  # a byte-order mark, as Windows editors write
+        text = text[1:]
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise fail(source, "file", "<TOML>", f"is not valid TOML ({e})") from None
+        where = str(e)
+        if "line" not in where:  # "(at end of document)": say where that is
+            last = text.rsplit("\n", 1)[-1]
+            where += f" (the end is line {text.count(chr(10)) + 1}, column {len(last) + 1})"
+        raise fail(source, "file", "<TOML>", f"is not valid TOML ({where})") from None
+    except RecursionError:
+        raise fail(source, "file", "<TOML>",
+                   "is not a train file: arrays or tables nested too deeply to read") from None
     train = train_from_dict(raw, source)
     if validate:
         from ._validate import validate_train
@@ -115,7 +150,7 @@ def train_from_dict(raw: dict, source: str | None = None) -> Train:
     if not isinstance(gears_raw, dict) or not gears_raw:
         raise fail(source, "gears", gears_raw, "at least one [gears.NAME] table is required")
     gears = tuple(_gear(r, name, g) for name, g in gears_raw.items())
-    return Train(
+    train = Train(
         name=name,
         stages=stages,
         couplings=couplings,
@@ -126,6 +161,10 @@ def train_from_dict(raw: dict, source: str | None = None) -> Train:
         mesh_damping=damping,
         source=source,
     )
+    from ._validate import check_ranges
+
+    check_ranges(train)  # bounds of every value (warnings come from validate_train)
+    return train
 
 
 def _stage(r: _Reader, raw, i: int) -> Stage:
@@ -288,7 +327,7 @@ class _Reader:
 
     def number(self, raw, key, field, *, default=_MISSING, low=None, strict=False, rule=None):
         value = self._get(raw, key, field, default)
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        if not _finite(value):
             raise self.fail(field, value, "must be a finite number")
         if low is not None and (value <= low if strict else value < low):
             raise self.fail(field, value, rule or f"must be {'>' if strict else '>='} {low:g}")
@@ -319,10 +358,7 @@ class _Reader:
 
     def vector(self, raw, key, field) -> np.ndarray:
         value = self._get(raw, key, field, self._MISSING)
-        if not isinstance(value, list) or not all(
-            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-            for v in value
-        ):
+        if not isinstance(value, list) or not all(_finite(v) for v in value):
             raise self.fail(field, value, "must be a list of finite numbers")
         return np.asarray(value, dtype=np.float64)
 
@@ -330,8 +366,7 @@ class _Reader:
         value = raw.get(key, [])
         ok = isinstance(value, list) and all(
             isinstance(row, list) and len(row) == columns
-            and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-                    for v in row)
+            and all(_finite(v) for v in row)
             for row in value
         )
         if not ok:
@@ -349,6 +384,16 @@ class _Reader:
                               default=default, rule=rule)
             for side in ("sun", "ring")
         })
+
+
+def _finite(value) -> bool:
+    """A TOML number that is a finite float64 (not a bool, not an integer too large)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:  # an integer beyond 1.8e308
+        return False
 
 
 # --------------------------------------------------------------------------- writing
