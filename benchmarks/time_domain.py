@@ -47,7 +47,7 @@ import numpy as np
 import scipy.integrate
 
 import gearjax as gj
-from gearjax import _hb, _sweep
+from gearjax import _harmonics, _hb, _sweep
 from gearjax import _time_domain as td
 from gearjax._responses import mesh_responses
 from gearjax._simulate import gear_case
@@ -80,8 +80,10 @@ def _responses(problem, Xs, omegas, F_static):
 
 def harmonic_balance(case, f_hz, repeats):
     omegas = case.omega(f_hz)
-    min_k = _hb.highest_excitation(case.system)
-    ks = np.array([_sweep.harmonics_rule(f / case.mu_ref, min_k) for f in f_hz])
+    min_k = _harmonics.excitation_floor(case.system)
+    cutoff = _harmonics.response_cutoff_hz(case.system)
+    ks = np.array([_harmonics.harmonics_rule(f / case.mu_ref, min_k, cutoff_hz=cutoff)
+                   for f in f_hz])
     problems = {int(K): _hb.hb_problem(case.system, _hb.HarmonicBalance(n_harmonics=int(K)))
                 for K in np.unique(ks)}
     F_static = jnp.asarray(case.F_static)

@@ -10,7 +10,13 @@ from ._design import (
     design_mesh as design_mesh,
     design_sweep as design_sweep,
 )
-from ._errors import GeometryWarning as GeometryWarning, TrainError as TrainError
+from ._errors import (
+    GeometryWarning as GeometryWarning,
+    RangeWarning as RangeWarning,
+    TrainError as TrainError,
+    TrainWarning as TrainWarning,
+)
+from ._harmonics import TruncationWarning as TruncationWarning
 from ._kinematics import Kinematics as Kinematics, kinematics as kinematics
 from ._mesh import (
     backlash as backlash,

@@ -1,9 +1,16 @@
 """The ``gearjax`` command line (interface.md): info, modes, calibrate, sweep, simulate,
-verify, sensitivity, optimize.
+verify, sensitivity, optimize, plot.
 
 Exit codes: 0 finished; 2 bad input or usage (one line on stderr, no traceback);
-3 finished but nothing converged. ``--json`` prints one JSON object on stdout and
-nothing else there; warnings go to stderr.
+3 finished but nothing converged; 1 an internal error or a problem too large for the
+memory (one line; ``GEARJAX_DEBUG=1`` shows the traceback); 130 interrupted.
+``--json`` prints one JSON object on stdout and nothing else there; warnings go to
+stderr, one line each.
+
+Refuse, don't guess: every output path (``--out``, ``--out-train``, ``--plot``,
+``plot --out``) is checked before any work; results are written atomically; a sweep's
+journal is locked while its run is live, so a second run on the same ``--out`` is
+refused instead of racing the first.
 """
 
 from __future__ import annotations
@@ -11,47 +18,244 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import pathlib
+import re
 import sys
 import warnings
 from fractions import Fraction
 
 import numpy as np
 
-from ._errors import GeometryWarning, TrainError, fail
+from ._errors import TrainError, TrainWarning, fail, one_line
 
-EXIT_OK, EXIT_INPUT, EXIT_NOT_CONVERGED = 0, 2, 3
+EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_NOT_CONVERGED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+DEBUG_ENV = "GEARJAX_DEBUG"
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = _parser()
-    args = parser.parse_args(argv)
-    if args.command is None:
-        parser.print_help(sys.stderr)
-        return EXIT_INPUT
     try:
-        if not getattr(args, "needs_train", True):  # e.g. plot: a results file, no train
-            return args.run(args, None, [])
-        from ._toml_io import load_train
+        args = parser.parse_args(argv)
+    except _UsageError as e:
+        return _refuse(str(e))
+    if args.command is None:
+        return _refuse(f"command line: COMMAND = (missing): give one of "
+                       f"{', '.join(_COMMANDS)} (gearjax --help describes them)")
+    notes: list[str] = []
+    try:
+        _check_outputs(args)
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", TrainWarning)
+            warnings.showwarning = _warning_printer(notes, warnings.showwarning)
+            if not getattr(args, "needs_train", True):  # e.g. plot: a results file, no train
+                return args.run(args, None, notes)
+            from ._toml_io import load_train
 
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", GeometryWarning)
             train = load_train(args.train)
-        notes = [str(w.message) for w in caught if issubclass(w.category, GeometryWarning)]
-        for note in notes:
-            print(f"warning: {note}", file=sys.stderr)
-        return args.run(args, train, notes)
+            return args.run(args, train, notes)
     except TrainError as e:
-        print(f"gearjax: error: {e}", file=sys.stderr)
-        return EXIT_INPUT
+        return _refuse(str(e))
+    except KeyboardInterrupt:
+        _stderr(_interrupted(args))
+        return EXIT_INTERRUPTED
+    except Exception as e:  # noqa: BLE001  no traceback reaches a user
+        if os.environ.get(DEBUG_ENV, "") not in ("", "0"):
+            raise
+        if _out_of_memory(e):
+            how = ("fewer harmonics (--harmonics K)" if hasattr(args, "harmonics")
+                   else "a smaller problem")
+            _stderr(f"gearjax: error: the problem did not fit in memory ({_one_line(e, 160)}): "
+                    f"try {how}, fewer points or a narrower band")
+            return EXIT_INTERNAL
+        if isinstance(e, OSError):
+            return _refuse(_os_error(e))
+        _stderr(f"gearjax: internal error: {type(e).__name__}: {_one_line(e)} "
+                f"(set {DEBUG_ENV}=1 for the traceback)")
+        return EXIT_INTERNAL
+
+
+def _refuse(message: str) -> int:
+    _stderr(f"gearjax: error: {one_line(message)}")
+    return EXIT_INPUT
+
+
+def _warning_printer(notes: list[str], fallback):
+    """A ``warnings.showwarning`` that prints each distinct :class:`TrainWarning` (and
+    any other warning of gearjax's own, e.g. a truncation estimate) once, as one line
+    on stderr, and keeps it in ``notes`` (the JSON ``warnings``)."""
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        ours = issubclass(category, TrainWarning) or category.__module__.startswith("gearjax")
+        if not ours:
+            return fallback(message, category, filename, lineno, file, line)
+        text = _one_line(message, 1000)
+        if text not in notes:
+            notes.append(text)
+            _stderr(f"warning: {text}")
+
+    return show
+
+
+def _one_line(e, limit: int = 300) -> str:
+    text = one_line(" ".join(str(e).split())) or type(e).__name__
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _out_of_memory(e: BaseException) -> bool:
+    if isinstance(e, MemoryError):
+        return True
+    text = str(e)
+    return "RESOURCE_EXHAUSTED" in text or "out of memory" in text.lower()
+
+
+def _os_error(e: OSError) -> str:
+    """One line naming the file and the operating system's reason."""
+    reason = e.strerror or _one_line(e)
+    if e.filename is not None:
+        where = str(e.filename) + (f" -> {e.filename2}" if e.filename2 is not None else "")
+        return f"{where}: {reason}"
+    return f"{type(e).__name__}: {_one_line(e)}"
+
+
+def _interrupted(args) -> str:
+    from ._journal import journal_path
+
+    out = getattr(args, "out", None)
+    if getattr(args, "command", None) == "sweep" and out and journal_path(out).exists():
+        return (f"gearjax: interrupted; the points found so far are in {journal_path(out)}: "
+                "run the same command with --resume to go on")
+    return "gearjax: interrupted"
+
+
+# ------------------------------------------------------------------ usage errors
+
+
+class _UsageError(Exception):
+    """argparse's refusal, made one line (:class:`_Parser`)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """``ArgumentParser`` whose usage errors are one line in the form of every other
+    refusal (``command line: FLAG = VALUE: RULE``) instead of a usage dump."""
+
+    def error(self, message: str):
+        raise _UsageError(_usage_message(self.prog, message))
+
+
+_COMMANDS = ("info", "modes", "calibrate", "sweep", "simulate", "verify", "sensitivity",
+             "optimize", "plot")
+
+
+def _usage_message(prog: str, message: str) -> str:
+    message = " ".join(message.split())
+    hint = f" (see {prog} --help)"
+    m = re.fullmatch(r"argument (\S+?)(?:/\S+)?: invalid choice: (.*?) \(choose from (.*)\)",
+                     message)
+    if m:
+        choices = ", ".join(c.strip().strip("'") for c in m[3].split(","))
+        return f"command line: {m[1]} = {m[2]}: must be one of {choices}{hint}"
+    m = re.fullmatch(r"argument (\S+?)(?:/\S+)?: invalid (\w+) value: (.*)", message)
+    if m:
+        rule = {"float": "must be a number", "int": "must be a whole number"}.get(
+            m[2], f"must be a valid {m[2]}")
+        return f"command line: {m[1]} = {m[3]}: {rule}{hint}"
+    m = re.fullmatch(r"the following arguments are required: (.*)", message)
+    if m:
+        flags = m[1]
+        return f"command line: {flags} = (missing): {prog} needs it{hint}"
+    m = re.fullmatch(r"argument (\S+?)(?:/\S+)?: (expected .*)", message)
+    if m:
+        return f"command line: {m[1]} = (missing): {m[2]}{hint}"
+    m = re.fullmatch(r"unrecognized arguments: (.*)", message)
+    if m:
+        return f"command line: {m[1]}: not a flag or argument of this command{hint}"
+    return f"command line: {prog}: {message}{hint}"
+
+
+# ------------------------------------------------------------------ output paths
+
+
+RESULT_SUFFIXES = {"sweep": (".nc", ".csv"), "simulate": (".nc", ".csv"),
+                   "verify": (".nc",), "optimize": (".nc",)}
+SUFFIX_RULES = {(".nc", ".csv"): "must end in .nc or .csv",
+                (".nc",): "must end in .nc (NetCDF)"}
+
+
+def _check_outputs(args) -> None:
+    """Refuse, before any work, an output path that cannot be written: a directory, a
+    missing or read-only directory, an unknown extension (one line, ``TrainError``)."""
+    cmd = args.command
+    out = getattr(args, "out", None)
+    if cmd == "plot":
+        results = pathlib.Path(args.results)
+        fig = pathlib.Path(out) if out else results.with_suffix(".png")
+        if os.path.abspath(fig) == os.path.abspath(results):
+            raise fail("command line", "--out", str(fig), "would overwrite the results file")
+        if results.is_file():  # else plot_results says there is no such results file
+            _check_figure("--out" if out else "--out (default: RESULTS with .png)", str(fig))
+    elif out is not None:
+        rule = SUFFIX_RULES[RESULT_SUFFIXES[cmd]]
+        if cmd == "verify":
+            rule = "must end in .nc (NetCDF, groups hb and ni)"
+        _check_output("--out", out, RESULT_SUFFIXES[cmd], rule)
+    if getattr(args, "out_train", None) is not None:
+        _check_output("--out-train", args.out_train, (".toml",), "must end in .toml")
+    if cmd != "plot" and getattr(args, "plot", None) is not None:
+        _check_figure("--plot", args.plot)
+    if cmd == "sweep" and args.resume and not args.out:
+        raise fail("command line", "--resume", True, "needs --out FILE: the run to resume "
+                   "is the one whose journal FILE.journal is there")
+
+
+def _check_output(flag: str, value: str, suffixes: tuple[str, ...], rule: str) -> None:
+    path = pathlib.Path(value)
+    if path.is_dir():
+        raise fail("command line", flag, value, "is a directory: name a file in it")
+    if not value.lower().endswith(suffixes):
+        raise fail("command line", flag, value, rule)
+    parent = path.parent
+    if not parent.exists():
+        raise fail("command line", flag, value, f"its directory {str(parent)!r} does not exist")
+    if not parent.is_dir():
+        raise fail("command line", flag, value, f"{str(parent)!r} is not a directory")
+    probe = parent / f".{path.name}.{os.getpid()}.probe"
+    try:  # really create a file there: permissions, read-only or special file systems
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        os.unlink(probe)
+    except OSError as e:
+        raise fail("command line", flag, value, f"its directory {str(parent)!r} is not "
+                   f"writable ({e.strerror or e})") from None
+
+
+def _check_figure(flag: str, value: str) -> None:
+    formats = _figure_formats()
+    ext = pathlib.Path(value).suffix.lower().lstrip(".")
+    rule = ("must end in a figure format matplotlib writes: "
+            + ", ".join("." + f for f in formats))
+    _check_output(flag, value, ("." + ext,) if ext in formats else (), rule)
+
+
+def _figure_formats() -> list[str]:
+    from matplotlib.figure import Figure
+
+    return sorted(Figure().canvas.get_supported_filetypes())
+
+
+def _atomic(path):
+    """Write ``path`` atomically (:func:`gearjax._results.atomic_path`)."""
+    from ._results import atomic_path
+
+    return atomic_path(path)
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="gearjax",
         description="Dynamics of compound planetary gear trains. TRAIN defaults to the bundled "
                     "Al-shyyab et al. (2009) case.",
     )
-    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     def command(name: str, run, help: str) -> argparse.ArgumentParser:
         c = sub.add_parser(name, help=help, description=help)
@@ -236,6 +440,7 @@ def _info(args, train, notes) -> int:
         "housing_leak": loads.leak,
         "torque_balance": loads.balance,
         "phasing": phasing,
+        "harmonics": _harmonics_info(train, g.name, kin),
         "warnings": notes,
     }
     if args.json:
@@ -263,7 +468,27 @@ def _info(args, train, notes) -> int:
             print(f"\nstage {sid} stiffness phasing (Parker & Lin, k = h Z_s mod N):")
             for r in rows:
                 print(f"  h={r['h']}  k={r['k']}  {r['kind']:<15} sun meshes {r['signs']}")
+    h = out["harmonics"]
+    if h is not None:
+        print(f"\nharmonic balance: at least K = {h['floor']} harmonics of the base "
+              f"({h['floor_rule']}); the first choice of K reaches {h['cutoff_hz']:.0f} Hz "
+              f"(5/3 of the highest mesh mode, {h['mesh_mode_hz']:.0f} Hz); a sweep checks "
+              "it against 2K")
     return EXIT_OK
+
+
+def _harmonics_info(train, gear: str, kin) -> dict | None:
+    """What the harmonic balance of ``gear`` needs: the excitation floor of K and the
+    response cutoff of its first choice (``None`` where no mesh turns)."""
+    from ._assembly import assemble
+    from ._harmonics import CUTOFF_MARGIN, excitation_floor, floor_reason, response_cutoff_hz
+
+    if kin.mu is None:
+        return None
+    system = assemble(train, gear, kin)
+    cutoff = response_cutoff_hz(system)
+    return {"floor": excitation_floor(system), "floor_rule": floor_reason(system, 1),
+            "cutoff_hz": cutoff, "mesh_mode_hz": cutoff / CUTOFF_MARGIN}
 
 
 # ---------------------------------------------------------------------------- modes
@@ -290,7 +515,8 @@ def _modes(args, train, notes) -> int:
     if args.plot:
         from ._plot import plot_mode_shapes
 
-        plot_mode_shapes(result, args.plot, title=f"{train.name}: gear {g.name}, elastic modes")
+        with _atomic(args.plot) as fig:
+            plot_mode_shapes(result, fig, title=f"{train.name}: gear {g.name}, elastic modes")
     if args.json:
         return _emit(out)
     print(f"{train.name}: gear {g.name!r}, {len(result.modes)} modes "
@@ -316,7 +542,8 @@ def _calibrate(args, train, notes) -> int:
     g = train.gear(args.gear)
     result = calibrate(train, args.targets_hz, args.free, g.name)
     if args.out_train:
-        save_train(result.train, args.out_train)
+        with _atomic(args.out_train) as tmp:
+            save_train(result.train, tmp)
     out = {
         "train": train.name,
         "gear": g.name,
@@ -357,16 +584,21 @@ def _calibrate(args, train, notes) -> int:
 
 
 def _sweep_cmd(args, train, notes) -> int:
-    from ._journal import journal_path
+    from ._journal import journal_path, lock
+
+    journal = journal_path(args.out) if args.out else None
+    held = lock(journal) if journal else None  # refused while another run writes it
+    try:
+        return _sweep_run(args, train, notes, journal)
+    finally:
+        if held is not None:
+            held.release()
+
+
+def _sweep_run(args, train, notes, journal) -> int:
     from ._results import save_results
     from ._sweep import progress_printer, summary_json, sweep
 
-    if args.out and not args.out.endswith((".nc", ".csv")):
-        raise fail("command line", "--out", args.out, "must end in .nc or .csv")
-    if args.resume and not args.out:
-        raise fail("command line", "--resume", True, "needs --out FILE: the run to resume "
-                   "is the one whose journal FILE.journal is there")
-    journal = journal_path(args.out) if args.out else None
     if args.resume and journal.exists():
         _stderr(f"sweep: resuming from {journal}")
     g = train.gear(args.gear)
@@ -378,12 +610,13 @@ def _sweep_cmd(args, train, notes) -> int:
     ds = result.dataset
     if args.out:
         save_results(ds, args.out)
-        journal.unlink()  # consolidated into the results file
+        journal.unlink(missing_ok=True)  # consolidated into the results file
     if args.plot:
         from ._plot import plot_sweep
 
         kind = "linear" if args.linear else "backlash"
-        plot_sweep(ds, args.plot, title=f"{train.name}: gear {g.name}, {kind}")
+        with _atomic(args.plot) as fig:
+            plot_sweep(ds, fig, title=f"{train.name}: gear {g.name}, {kind}")
     out = summary_json(result)
     out["warnings"] = notes
     converged = bool(np.any(ds["converged"].values))
@@ -430,8 +663,6 @@ def _simulate_cmd(args, train, notes) -> int:
     from ._results import points_json, save_results
     from ._simulate import simulate_gear
 
-    if args.out and not args.out.endswith((".nc", ".csv")):
-        raise fail("command line", "--out", args.out, "must end in .nc or .csv")
     g = train.gear(args.gear)
     ds = simulate_gear(train, g.name, args.at, from_hz=args.from_hz, to_hz=args.to_hz,
                        points=args.points, stage=args.stage, linear=args.linear,
@@ -442,7 +673,9 @@ def _simulate_cmd(args, train, notes) -> int:
         from ._plot import plot_points
 
         kind = "linear" if args.linear else "backlash"
-        plot_points(ds, args.plot, title=f"{train.name}: gear {g.name}, {kind}, time integration")
+        with _atomic(args.plot) as fig:
+            plot_points(ds, fig, title=f"{train.name}: gear {g.name}, {kind}, time "
+                                       "integration")
     converged = bool(np.any(ds["converged"].values))
     code = EXIT_OK if converged else EXIT_NOT_CONVERGED
     out = {"gear": g.name, "reference_stage": ds.attrs["reference_stage"],
@@ -477,9 +710,6 @@ def _simulate_cmd(args, train, notes) -> int:
 def _verify_cmd(args, train, notes) -> int:
     from ._verify import save_verify, verify_gear, verify_json
 
-    if args.out and not args.out.endswith(".nc"):
-        raise fail("command line", "--out", args.out, "must end in .nc (NetCDF, groups hb "
-                   "and ni)")
     g = train.gear(args.gear)
     curve = None
     if args.curve:
@@ -497,11 +727,13 @@ def _verify_cmd(args, train, notes) -> int:
         from ._plot import plot_verify
 
         kind = "linear" if args.linear else "backlash"
-        plot_verify(result.hb, result.ni, args.plot, curve=curve,
-                    title=f"{train.name}: gear {g.name}, {kind}: harmonic balance (line) and "
-                          "time integration (markers)")
+        with _atomic(args.plot) as fig:
+            plot_verify(result.hb, result.ni, fig, curve=curve,
+                        title=f"{train.name}: gear {g.name}, {kind}: harmonic balance (line) "
+                              "and time integration (markers)")
     if args.out:
-        save_verify(result, args.out)
+        with _atomic(args.out) as tmp:
+            save_verify(result, tmp)
     out = verify_json(result)
     out["warnings"] = notes
     converged = any(p["converged"] for p in out["points"])
@@ -541,7 +773,10 @@ def _verify_cmd(args, train, notes) -> int:
 def _plot_cmd(args, train, notes) -> int:
     from ._plot import plot_results
 
-    kind, fig = plot_results(args.results, args.out, what=args.what)
+    results = pathlib.Path(args.results)
+    fig = pathlib.Path(args.out) if args.out else results.with_suffix(".png")
+    with _atomic(fig) as tmp:
+        kind, _ = plot_results(results, tmp, what=args.what)
     if args.json:
         return _emit({"results": args.results, "kind": kind, "what": args.what,
                       "figure": str(fig)})
@@ -590,10 +825,6 @@ def _optimize_cmd(args, train, notes) -> int:
     from ._results import save_results
     from ._toml_io import save_train
 
-    if args.out and not args.out.endswith(".nc"):
-        raise fail("command line", "--out", args.out, "must end in .nc (NetCDF)")
-    if args.out_train and not args.out_train.endswith(".toml"):
-        raise fail("command line", "--out-train", args.out_train, "must end in .toml")
     settings = OptimizeSettings(
         proxy_points=args.proxy_points, phase_grid=args.phase_grid, screen=args.screen,
         screen_points=args.points, final_points=args.final_points, harmonics=args.harmonics,
@@ -605,7 +836,8 @@ def _optimize_cmd(args, train, notes) -> int:
     result = optimize(train, g.name, tuple(args.band), args.vary, stage=args.stage,
                       settings=settings, progress=_stderr)
     if args.out_train:
-        save_train(result.train, args.out_train)
+        with _atomic(args.out_train) as tmp:
+            save_train(result.train, tmp)
     if args.out:
         save_results(optimize_dataset(result, {"command": " ".join(sys.argv)}), args.out)
     out = optimize_json(result)

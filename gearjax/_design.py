@@ -66,7 +66,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from jaxtyping import Array, Float
 
-from . import _hb
+from . import _harmonics, _hb
 from ._errors import fail
 from ._kinematics import kinematics, require_base
 from ._responses import mesh_responses, static_mesh_forces
@@ -338,9 +338,9 @@ def design_sweep(
     if not linear:
         _check_unloaded(train, g, kin, nominal)
     if harmonics is None:
-        harmonics = max(_hb.highest_excitation(nominal), 1)
-    if int(harmonics) != harmonics or harmonics < 1:
-        raise fail("command line", "--harmonics", harmonics, "must be an integer >= 1")
+        harmonics = _harmonics.excitation_floor(nominal)
+    _harmonics.require_harmonics(nominal, harmonics)
+    _harmonics.require_size(nominal, int(harmonics), mu=mu)
     solver = resolve_solver(solver, nominal)
     settings = _hb.HarmonicBalance(n_harmonics=int(harmonics))
     omegas = 2 * math.pi * f / mu_ref

@@ -126,8 +126,23 @@ def stiffness_at_phases(system: System, eta: int, tau: Array) -> Array:
 
 
 def hb_problem(system: System, settings: HarmonicBalance = HarmonicBalance()) -> HBProblem:
-    """Precompute the Omega-independent parts of the harmonic balance of ``system``."""
+    """Precompute the Omega-independent parts of the harmonic balance of ``system``.
+
+    **Raises:** ``ValueError`` where the discretisation cannot hold the excitation:
+    ``settings.n_harmonics`` below the highest excitation order
+    (:func:`highest_excitation`), or ``settings.n_time`` too few samples for the
+    product of the stiffness and a deflection (``2 K + highest`` or fewer: aliased).
+    """
     K, eta = settings.n_harmonics, settings.eta
+    top = highest_excitation(system, eta)
+    if K < max(top, 1):
+        raise ValueError(f"HarmonicBalance.n_harmonics = {K}: the excitation reaches harmonic "
+                         f"{top} of the base (eta = {eta}); the solution needs at least that "
+                         "many harmonics")
+    if settings.n_time is not None and settings.n_time <= 2 * K + top:
+        raise ValueError(f"HarmonicBalance.n_time = {settings.n_time}: the AFT needs more "
+                         f"than 2 K + {top} = {2 * K + top} samples (products of the "
+                         "stiffness and a deflection alias otherwise)")
     T = settings.n_time or time_samples(K, system, eta)
     tau = _aft.phases(T)
     mu = jnp.asarray(system.mesh_mu) * eta

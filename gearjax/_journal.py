@@ -18,26 +18,38 @@ so an interruption at any moment (``kill -9``, power loss) leaves every earlier
 record intact. A torn last record (no newline, bad checksum or bad JSON) is
 ignored with a warning and cut off when the journal is appended to again; a bad
 record before the last is corruption, refused.
+
+A journal being written is locked (:func:`lock`): an OS lock (``fcntl.flock``) on
+``FILE.journal.lock``, which holds the writer's pid. The kernel drops the lock when
+the process ends in any way (``kill -9`` included), so a journal left by a crash is
+resumed at once; while a run is live, another process that would read, append to or
+replace its journal is refused (:class:`JournalBusy`, naming the pid). The lock is
+re-entrant within one process (the command line holds it from before the run until
+the journal is consolidated into the results; the :class:`Writer` takes it too).
 """
 
 from __future__ import annotations
 
 import base64
+import errno
+import fcntl
 import json
 import math
 import os
 import pathlib
 import sys
+import threading
 import zlib
 from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from ._errors import fail
+from ._errors import TrainError, fail
 
 FORMAT = "gearjax-journal"
 VERSION = 1
 SUFFIX = ".journal"
+LOCK_SUFFIX = ".lock"
 
 
 def journal_path(results_path) -> pathlib.Path:
@@ -104,6 +116,147 @@ def _from_json(value):
     return value
 
 
+# ------------------------------------------------------------------------ locking
+
+
+class JournalBusy(TrainError):
+    """Another live process is writing this journal (one line naming it and its pid)."""
+
+
+def lock_path(journal) -> pathlib.Path:
+    """The lock file of a journal: ``FILE.journal`` -> ``FILE.journal.lock``."""
+    return pathlib.Path(str(journal) + LOCK_SUFFIX)
+
+
+class JournalLock:
+    """This process's hold on a journal's lock (from :func:`lock`); ``release`` (or the
+    ``with`` block's end) gives one hold back, the last one unlocks and removes the lock
+    file."""
+
+    def __init__(self, journal: pathlib.Path, key: str):
+        self.journal = journal
+        self._key = key
+        self._released = False
+
+    def release(self) -> None:
+        if self._released:
+            return
+        self._released = True
+        with _guard:
+            entry = _held.get(self._key)
+            if entry is None:
+                return
+            entry[1] -= 1
+            if entry[1] > 0:
+                return
+            del _held[self._key]
+            fd = entry[0]
+            try:  # removed while still locked: a process that opened it meanwhile retries
+                os.unlink(self._key)
+            except OSError:
+                pass
+            os.close(fd)  # drops the lock
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
+
+
+_held: dict[str, list] = {}  # lock file (absolute) -> [fd, holds, pid] of this process
+_guard = threading.Lock()
+
+
+def lock(journal) -> JournalLock:
+    """Lock the journal ``journal`` for this process (re-entrant) before writing it.
+
+    **Raises:** :class:`JournalBusy` when another live process holds it; ``TrainError``
+    when the lock file cannot be written (e.g. no such directory)."""
+    journal = pathlib.Path(journal)
+    key = os.path.abspath(lock_path(journal))
+    with _guard:
+        entry = _held.get(key)
+        if entry is not None and entry[2] == os.getpid():
+            entry[1] += 1
+            return JournalLock(journal, key)
+        _held.pop(key, None)  # inherited across a fork: not ours
+        for _ in range(100):
+            try:
+                fd = os.open(key, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), 0o644)
+            except OSError as e:
+                raise fail(key, "journal lock", None,
+                           f"cannot be written ({e.strerror or e})") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as e:
+                pid = _read_pid(fd)
+                os.close(fd)
+                if e.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                    raise _busy(journal, pid) from None
+                raise fail(key, "journal lock", None,
+                           f"cannot be taken ({e.strerror or e})") from None
+            try:  # still the file at that name (not removed by its last holder meanwhile)?
+                same = os.path.samestat(os.fstat(fd), os.stat(key))
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        else:  # pragma: no cover  (a lock file replaced a hundred times in a row)
+            raise fail(key, "journal lock", None, "keeps being replaced by another process")
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, b"%d\n" % os.getpid(), 0)
+        _held[key] = [fd, 1, os.getpid()]
+        return JournalLock(journal, key)
+
+
+def holder(journal) -> int | None:
+    """The pid of another live process that holds ``journal``'s lock (0 when it has not
+    written its pid yet), or ``None`` when none does (this process's own hold is not
+    counted)."""
+    key = os.path.abspath(lock_path(journal))
+    with _guard:
+        entry = _held.get(key)
+        if entry is not None and entry[2] == os.getpid():
+            return None
+    try:
+        fd = os.open(key, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return None  # no lock file: nobody writes it
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except OSError as e:
+            if e.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                return _read_pid(fd) or 0
+            return None
+        return None
+    finally:
+        os.close(fd)  # drops the probe's shared lock
+
+
+def refuse_if_busy(journal) -> None:
+    """Raise :class:`JournalBusy` when another live process holds ``journal``'s lock."""
+    pid = holder(journal)
+    if pid is not None:
+        raise _busy(pathlib.Path(journal), pid)
+
+
+def _busy(journal: pathlib.Path, pid: int | None) -> JournalBusy:
+    who = f"pid {pid}" if pid else "pid unknown"
+    return JournalBusy(f"{journal}: another gearjax process ({who}) is writing this journal "
+                       "now; wait for it or choose another --out")
+
+
+def _read_pid(fd: int) -> int | None:
+    try:
+        text = os.pread(fd, 32, 0)
+        return int(text.strip() or b"0") or None
+    except (OSError, ValueError):
+        return None
+
+
 # -------------------------------------------------------------------- reading
 
 
@@ -120,9 +273,11 @@ def read(path, warn: Callable[[str], None] = _stderr) -> tuple[dict | None, list
     a message to ``warn``.
 
     **Raises:** ``TrainError`` (one line naming the file) when the file cannot be read,
-    is not a gearjax journal, or is damaged before its last record.
+    is not a gearjax journal, or is damaged before its last record;
+    :class:`JournalBusy` when another live process is writing it.
     """
     path = pathlib.Path(path)
+    refuse_if_busy(path)
     try:
         data = path.read_bytes()
     except OSError as e:
@@ -188,38 +343,51 @@ class Writer:
 
     ``Writer.create(path, head)`` starts a new journal (replacing any file there);
     ``Writer.append_to(path, size)`` continues one whose intact part is ``size`` bytes
-    (from :func:`read`), cutting off a torn last record.
+    (from :func:`read`), cutting off a torn last record. Both first :func:`lock` the
+    journal (:class:`JournalBusy` when another live process writes it); ``close``
+    gives the lock back.
     """
 
-    def __init__(self, path, file):
+    def __init__(self, path, file, held: JournalLock | None = None):
         self.path = pathlib.Path(path)
         self._file = file
+        self._lock = held
 
     @classmethod
     def create(cls, path, head: Mapping) -> Writer:
         path = pathlib.Path(path)
+        held = lock(path)
         try:
-            file = open(path, "wb")
-        except OSError as e:
-            raise fail(str(path), "journal", None,
-                       f"cannot be written ({e.strerror or e})") from None
-        writer = cls(path, file)
-        writer.append(head)
-        _sync_directory(path)
+            try:
+                file = open(path, "wb")
+            except OSError as e:
+                raise fail(str(path), "journal", None,
+                           f"cannot be written ({e.strerror or e})") from None
+            writer = cls(path, file, held)
+            writer.append(head)
+            _sync_directory(path)
+        except BaseException:
+            held.release()
+            raise
         return writer
 
     @classmethod
     def append_to(cls, path, size: int) -> Writer:
         path = pathlib.Path(path)
+        held = lock(path)
         try:
-            file = open(path, "r+b")
-        except OSError as e:
-            raise fail(str(path), "journal", None,
-                       f"cannot be written ({e.strerror or e})") from None
-        file.truncate(size)
-        file.seek(size)
-        os.fsync(file.fileno())
-        return cls(path, file)
+            try:
+                file = open(path, "r+b")
+            except OSError as e:
+                raise fail(str(path), "journal", None,
+                           f"cannot be written ({e.strerror or e})") from None
+            file.truncate(size)
+            file.seek(size)
+            os.fsync(file.fileno())
+        except BaseException:
+            held.release()
+            raise
+        return cls(path, file, held)
 
     def append(self, record: Mapping) -> None:
         self._file.write(encode(record))
@@ -227,7 +395,11 @@ class Writer:
         os.fsync(self._file.fileno())
 
     def close(self) -> None:
-        self._file.close()
+        try:
+            self._file.close()
+        finally:
+            if self._lock is not None:
+                self._lock.release()
 
     def __enter__(self):
         return self

@@ -84,7 +84,7 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.optimize
 
-from . import _hb
+from . import _harmonics, _hb
 from ._design import batched_rms, peak_of
 from ._errors import fail
 from ._kinematics import kinematics, require_base
@@ -921,7 +921,10 @@ def optimize(
     nominal = assemble_at(train, g.name)
     if settings.nonlinear:
         _check_unloaded(train, g, kin, nominal)
-    K = settings.harmonics or max(_hb.highest_excitation(nominal), 1)
+    K = settings.harmonics or _harmonics.excitation_floor(nominal)
+    for k in {int(K), int(settings.nonlinear_harmonics or K)}:
+        _harmonics.require_harmonics(nominal, k)
+        _harmonics.require_size(nominal, k, mu=mu)
     hb_settings = _hb.HarmonicBalance(n_harmonics=int(K))
     n_peaks = settings.screen_points // 2
     f_shared = np.geomspace(lo, hi, settings.screen_points - n_peaks)
@@ -1230,7 +1233,7 @@ def _check_settings(s: OptimizeSettings) -> None:
         val = getattr(s, name)
         if val is not None and (int(val) != val or val < 1):
             raise fail("command line", flag, val, "must be an integer >= 1")
-    if s.max_step_hz is not None and not s.max_step_hz > 0:
+    if s.max_step_hz is not None and not (s.max_step_hz > 0 and math.isfinite(s.max_step_hz)):
         raise fail("command line", "--max-step", s.max_step_hz, "must be > 0 Hz")
     if not s.temperature > 0:
         raise fail("command line", "--temperature", s.temperature, "must be > 0")

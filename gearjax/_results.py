@@ -39,10 +39,13 @@ planet, mesh_frequency_hz, stage_mesh_frequency_hz`` (the mesh's own stage),
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import json
 import math
+import os
 import pathlib
+import secrets
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -262,18 +265,68 @@ def displacement_coefficients(ds: xr.Dataset, i: int) -> np.ndarray:
 def save_results(ds: xr.Dataset, path) -> pathlib.Path:
     """Write ``ds`` to ``path``: NetCDF (h5netcdf engine) for ``.nc``, CSV (one row per
     point and mesh) for ``.csv``; any other suffix is refused with a ``ValueError``.
-    **Returns:** the path written."""
+    The file is written atomically (:func:`atomic_path`): an interrupted write leaves
+    any earlier file at ``path`` as it was, never half a file. **Returns:** the path
+    written."""
     path = pathlib.Path(path)
     suffix = path.suffix.lower()
-    if suffix == ".nc":
-        ds.to_netcdf(path, engine="h5netcdf")
-    elif suffix == ".csv":
-        results_frame(ds).to_csv(path, index=False)
-    else:
+    if suffix not in (".nc", ".csv"):
         raise ValueError(
             f"results file {str(path)!r} has suffix {path.suffix!r}: use one of "
             f"{', '.join(SUFFIXES)} (NetCDF or CSV)")
+    with atomic_path(path) as tmp:
+        if suffix == ".nc":
+            ds.to_netcdf(tmp, engine="h5netcdf")
+        else:
+            results_frame(ds).to_csv(tmp, index=False)
     return path
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """``with atomic_path(path) as tmp:`` write the file ``tmp`` (a new name in the same
+    directory, with ``path``'s suffix); when the block ends without an exception ``tmp``
+    is synced to disk and renamed to ``path`` (``os.replace``: atomic, so a reader
+    sees the old file or the whole new one, and two writers never mix), else removed."""
+    path = pathlib.Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp{path.suffix}")
+    try:
+        yield tmp
+        try:
+            fd = os.open(tmp, os.O_RDONLY)
+        except FileNotFoundError:
+            raise OSError(f"{tmp} was not written") from None
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except BaseException as e:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        if isinstance(e, OSError) and str(tmp) in (str(e.filename), str(e)):
+            # name the file the caller asked for, not the temporary one
+            if e.filename is not None:
+                raise OSError(e.errno, e.strerror, str(path)) from e
+            raise OSError(str(e).replace(str(tmp), str(path))) from e
+        raise
+    _sync_directory(path.parent)
+
+
+def _sync_directory(directory: pathlib.Path) -> None:
+    """Make a renamed file's directory entry durable (best effort: not on every OS)."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def load_results(path) -> xr.Dataset:

@@ -59,7 +59,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from . import _hb
+from . import _harmonics, _hb
 from ._assembly import assemble
 from ._errors import fail
 from ._kinematics import kinematics, require_base
@@ -340,7 +340,7 @@ class _GearPoint:
     """A gear prepared at fixed harmonics: family, nominal parameters, reference stage."""
 
     def __init__(self, train: Train, gear, paths, stage, linear, harmonics, f_hz):
-        from ._sweep import _check_unloaded, _reference_stage, harmonics_rule
+        from ._sweep import _check_unloaded, _reference_stage
 
         g = train.gear(gear)
         kin = kinematics(train, g.name)
@@ -359,8 +359,12 @@ class _GearPoint:
             _check_unloaded(train, g, kin, system)
         f = np.atleast_1d(np.asarray(f_hz, dtype=float))
         if harmonics is None:
-            harmonics = harmonics_rule(float(f.min()) / self.mu_ref,
-                                       _hb.highest_excitation(system))
+            harmonics = _harmonics.harmonics_rule(
+                float(f.min()) / self.mu_ref, _harmonics.excitation_floor(system),
+                cutoff_hz=_harmonics.response_cutoff_hz(system))
+        else:
+            _harmonics.require_harmonics(system, harmonics)
+        _harmonics.require_size(system, int(harmonics), mu=mu)
         self.settings = _hb.HarmonicBalance(n_harmonics=int(harmonics))
         self.problem = _problem_jit(self.family, self.theta, self.settings)
         self.system = self.problem.system

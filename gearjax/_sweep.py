@@ -3,10 +3,13 @@
 Frequencies are the mesh frequency (Hz) of a reference stage; with the gear's
 coprime ``mu``, ``Omega = 2 pi f / mu_ref`` is the base frequency of every
 excitation. The number of solution harmonics depends on frequency
-(:func:`harmonics_rule`): low base frequencies need many harmonics to reach the
-modes the excitation drives, high ones few. It is fixed within a segment of the
-band, so each segment compiles once; at a segment boundary the solution is padded
-or truncated to the next segment's harmonics and re-converged on the boundary.
+(:func:`gearjax._harmonics.harmonics_rule`): low base frequencies need many harmonics
+to reach the modes the excitation drives, high ones few. It is fixed within a segment
+of the band, so each segment compiles once; at a segment boundary the solution is
+padded or truncated to the next segment's harmonics and re-converged on the boundary.
+Each segment's K is checked at its first frequency by the truncation estimate
+(:func:`gearjax._harmonics.truncation_change`) and doubled until the estimate meets
+the target, before the walk starts.
 
 Linear sweeps (no backlash) are independent points: the periodic solution of a
 linear time-periodic system is unique wherever it exists, so a grid of frequencies
@@ -27,6 +30,7 @@ import pathlib
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Callable
 
 import jax
@@ -34,9 +38,10 @@ import jax.numpy as jnp
 import numpy as np
 import threadpoolctl
 
-from . import _aft, _continuation, _hb, _journal, _time_domain
+from . import _aft, _continuation, _harmonics, _hb, _journal, _time_domain
 from ._assembly import assemble
 from ._errors import TrainError, fail
+from ._harmonics import harmonics_rule
 from ._kinematics import kinematics, require_base
 from ._responses import mesh_responses, static_mesh_forces
 from ._results import add_displacement_harmonics, mesh_coordinates, sweep_dataset
@@ -44,12 +49,6 @@ from ._stability import (bifurcation_kind, floquet_steps, scaled_monodromy, verd
                          verdict_basis)
 from ._toml_io import dumps_train
 from ._train import Train
-
-RESPONSE_CUTOFF_HZ = 25e3
-"""Response content the default harmonics must reach: the modes the meshes drive, and the
-higher harmonics that tooth separation adds (see :func:`harmonics_rule`)."""
-
-MAX_DEFAULT_HARMONICS = 64
 
 MAX_DETOUR = 150
 """Points a continuation may go without passing its furthest frequency before the sweep
@@ -76,29 +75,6 @@ MAX_RESTARTS = 100
 
 RESTART_STOPS = ("closed_loop", "detour", "step_too_small", "nonfinite", "runaway")
 """Continuation stops after which a sweep restarts on a new branch."""
-
-
-def harmonics_rule(base_hz: float, min_harmonics: int, eta: int = 1,
-                   cutoff_hz: float = RESPONSE_CUTOFF_HZ) -> int:
-    """Default solution harmonics K at base frequency ``base_hz`` (Hz).
-
-    ``K = eta * ceil16(cutoff / base)``, at least the highest excitation harmonic
-    ``min_harmonics`` and at most 64 (times ``eta``): enough that RMS mesh forces
-    change by < 0.5% when K doubles on the paper case, with and without tooth
-    separation (tests/test_hb_rules.py). Steps of 16 keep a 2-15 kHz sweep to three
-    segments (three compilations).
-
-    Why 25 kHz: measured on the paper's first gear with 0.05 mm backlash (largest
-    relative RMS change over the meshes against K = 128), K = 32 is off by 2.8% at
-    4 kHz (15% separation), 1.0% at 4.4 kHz and 0.52% at 4.8 kHz (both in contact),
-    0.28% at 5.5 kHz; K = 48 by 0.70% at 2 kHz, 0.29% at 2.7 and 3.65 kHz (26%
-    separation), 0.10% at 4 kHz; K = 64 by 0.16% at 2 kHz. A 20 kHz cutoff switched
-    to K = 32 at 4.4 kHz, where the curves jumped by 1.4% at the segment boundary.
-    With 25 kHz: K = 64 below 3.65 kHz, 48 to 5.47 kHz, 32 above (``mu = 7``).
-    """
-    k = 16 * math.ceil(cutoff_hz / max(base_hz, 1e-9) / 16)
-    return eta * int(min(max(k, min_harmonics // eta if eta else min_harmonics,
-                             8), MAX_DEFAULT_HARMONICS))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -185,6 +161,8 @@ def sweep(
     an unknown stage, or backlash on an unloaded stage without ``drag_torque``.
     """
     t_start = time.perf_counter()
+    _check_arguments(from_hz, to_hz, eta=eta, smoothing=smoothing, harmonics=harmonics,
+                     max_step_hz=max_step_hz, points=points, max_points=max_points)
     g = train.gear(gear)
     kin = kinematics(train, g.name)
     mu = require_base(kin, train.source)
@@ -195,28 +173,16 @@ def sweep(
         system = dataclasses.replace(system, backlash=jnp.zeros_like(system.backlash))
     else:
         _check_unloaded(train, g, kin, system)
-    for name, f in (("--from", from_hz), ("--to", to_hz)):
-        if not (f > 0 and math.isfinite(f)):
-            raise fail("command line", name, f, "must be a positive mesh frequency in Hz")
-    if from_hz == to_hz:
-        raise fail("command line", "--to", to_hz, "must differ from --from")
-    if eta < 1:
-        raise fail("command line", "--eta", eta, "must be an integer >= 1")
-    if not (0.0 <= smoothing < 1.0):
-        raise fail("command line", "--smoothing", smoothing,
-                   "must be >= 0 (0: exact backlash) and < 1 (relative to the backlash)")
-    if harmonics is not None and harmonics < 1:
-        raise fail("command line", "--harmonics", harmonics, "must be an integer >= 1")
-
-    min_k = _hb.highest_excitation(system, eta)
-    segments = _segments(from_hz, to_hz, mu_ref, min_k, eta, harmonics)
+    min_k = _harmonics.excitation_floor(system, eta)
+    if harmonics is not None:
+        _harmonics.require_harmonics(system, harmonics, eta)
+    cutoff_hz = _harmonics.response_cutoff_hz(system)
+    segments = _segments(from_hz, to_hz, mu_ref, min_k, eta, harmonics, cutoff_hz)
+    for K in sorted({k for *_, k in segments}):
+        _harmonics.require_size(system, K, mu=mu)
     F_static = static_mesh_forces(system)
     runaway = RUNAWAY * (np.abs(np.asarray(F_static)) / np.asarray(system.kbar)
                          + np.asarray(system.backlash))  # RMS mesh deflection limit (m)
-    solver = {"method": "harmonic balance", "linear": linear, "eta": eta,
-              "segments": [list(s) for s in segments], "reference_stage": ref,
-              "max_step_hz": max_step_hz, "cutoff_hz": RESPONSE_CUTOFF_HZ,
-              "smoothing": smoothing}
     run = {"train": dumps_train(train), "--gear": g.name, "--stage": ref,
            "--from": float(from_hz), "--to": float(to_hz), "--linear": bool(linear),
            "--harmonics": None if harmonics is None else int(harmonics), "--eta": int(eta),
@@ -227,11 +193,22 @@ def sweep(
     else:
         run["--max-points"] = int(max_points)
     log = _SweepLog.open(journal, run, resume)
-    post = _PostStream(F_static)
-    blas = None if linear else _blas_threads()  # a linear sweep's post-processing is after
     ctx = _Context(system=system, eta=eta, smoothing=smoothing, from_hz=from_hz,
                    to_hz=to_hz, mu_ref=mu_ref, max_step_hz=max_step_hz,
                    max_points=max_points, max_detour=max_detour, runaway=runaway)
+    try:
+        segments, truncation = _checked_segments(ctx, log, segments, F_static,
+                                                 fixed=harmonics is not None, mu=mu)
+    except BaseException:
+        log.close()
+        raise
+    solver = {"method": "harmonic balance", "linear": linear, "eta": eta,
+              "segments": [list(s) for s in segments], "reference_stage": ref,
+              "max_step_hz": max_step_hz, "cutoff_hz": cutoff_hz,
+              "truncation": truncation, "truncation_target": _harmonics.TRUNCATION_TARGET,
+              "smoothing": smoothing}
+    post = _PostStream(F_static)
+    blas = None if linear else _blas_threads()  # a linear sweep's post-processing is after
     walk = _Walk(segments=list(segments))
     spec = None
     try:
@@ -665,6 +642,7 @@ class _SweepLog:
             return cls([])
         path = pathlib.Path(journal)
         head = _journal.header("sweep", run)
+        _journal.refuse_if_busy(path)
         if path.exists():
             if not resume:
                 raise TrainError(
@@ -706,6 +684,17 @@ class _SweepLog:
 
     def batch(self, j: int) -> dict | None:
         return self._other.get(("batch", j))
+
+    def require_K(self, j: int, K: int) -> None:
+        """Refuse a journal whose segment ``j`` was solved with another K than ``K`` (the
+        truncation check of this run decided otherwise: another machine's round-off)."""
+        recs = self.points(j)[:1] + [r for r in [self.batch(j)] if r is not None]
+        for rec in recs:
+            if int(rec["K"]) != int(K):
+                where = self._writer.path if self._writer else "journal"
+                raise fail(str(where), f"segment {j} K", int(rec["K"]),
+                           f"this run's truncation check chose K = {K} for that segment: "
+                           "delete the journal to start afresh")
 
     def close(self) -> None:
         if self._writer is not None:
@@ -849,13 +838,16 @@ def _check_unloaded(train, g, kin, system):
                        "mean position: give the gear a drag_torque, or sweep with --linear")
 
 
-def _segments(from_hz, to_hz, mu_ref, min_k, eta, fixed):
-    """``(f_a, f_b, K)`` in sweep order; K constant on each."""
+def _segments(from_hz, to_hz, mu_ref, min_k, eta, fixed, cutoff_hz):
+    """``(f_a, f_b, K)`` in sweep order; K constant on each: ``fixed``, else the first
+    choice of :func:`gearjax._harmonics.harmonics_rule` at response base frequencies
+    ``f / mu_ref / eta`` with the system's ``cutoff_hz``, never below ``min_k``."""
     if fixed is not None:
         return [(from_hz, to_hz, int(fixed))]
     lo, hi = sorted((from_hz, to_hz))
     edges = np.geomspace(lo, hi, 65)
-    ks = [harmonics_rule(f / mu_ref / eta, min_k, eta) for f in edges[:-1]]
+    ks = [harmonics_rule(f / mu_ref / eta, min_k, eta, cutoff_hz=cutoff_hz)
+          for f in edges[:-1]]
     segs = []
     for f_a, f_b, k in zip(edges[:-1], edges[1:], ks):
         if segs and segs[-1][2] == k:
@@ -868,6 +860,96 @@ def _segments(from_hz, to_hz, mu_ref, min_k, eta, fixed):
     segs[0] = (float(from_hz), segs[0][1], segs[0][2])
     segs[-1] = (segs[-1][0], float(to_hz), segs[-1][2])
     return segs
+
+
+def _check_arguments(from_hz, to_hz, *, eta, smoothing, harmonics, max_step_hz, points,
+                     max_points) -> None:
+    """Refuse arguments that cannot describe a sweep, before any work (``TrainError``
+    named after the command-line flags)."""
+    def integer(value) -> bool:
+        return isinstance(value, int | np.integer) and not isinstance(value, bool)
+
+    for name, f in (("--from", from_hz), ("--to", to_hz)):
+        if not (isinstance(f, int | float) and f > 0 and math.isfinite(f)):
+            raise fail("command line", name, f, "must be a positive mesh frequency in Hz")
+    if from_hz == to_hz:
+        raise fail("command line", "--to", to_hz, "must differ from --from")
+    if not integer(eta) or eta < 1:
+        raise fail("command line", "--eta", eta, "must be an integer >= 1")
+    if not (isinstance(smoothing, int | float) and 0.0 <= smoothing < 1.0):
+        raise fail("command line", "--smoothing", smoothing,
+                   "must be >= 0 (0: exact backlash) and < 1 (relative to the backlash)")
+    if harmonics is not None and (not integer(harmonics) or harmonics < 1):
+        raise fail("command line", "--harmonics", harmonics, "must be an integer >= 1")
+    if max_step_hz is not None and not (isinstance(max_step_hz, int | float)
+                                        and max_step_hz > 0 and math.isfinite(max_step_hz)):
+        raise fail("command line", "--max-step", max_step_hz,
+                   "must be a positive frequency step in Hz (omit it for 1/100 of the band)")
+    if not integer(points) or points < 2:
+        raise fail("command line", "--points", points, "must be an integer >= 2")
+    if not integer(max_points) or max_points < 2:
+        raise fail("command line", "--max-points", max_points, "must be an integer >= 2")
+
+
+def _checked_segments(ctx, log, segments, F_static, *, fixed: bool, mu):
+    """The segments with K checked a posteriori, and the estimates ``[{"from_hz", "K",
+    "change", "K_check"}]``.
+
+    At each segment's first frequency the point is solved with K and with 2K
+    (:func:`gearjax._harmonics.truncation_change`); where the relative change of a
+    mesh's RMS force exceeds ``TRUNCATION_TARGET`` K doubles (while the check at twice
+    it is affordable, :func:`gearjax._harmonics.check_affordable`) and the check repeats.
+    A ``fixed`` K (the user's) is checked, warned about and kept. A resumed run checks
+    again (the same decisions on the same machine); a journal whose records were solved
+    with another K is refused (:meth:`_SweepLog.require_K`)."""
+    target = _harmonics.TRUNCATION_TARGET
+    out, estimates = [], []
+    for f_a, f_b, K in segments:
+        while True:
+            skip = _harmonics.check_affordable(ctx.system, K)
+            if skip is not None:
+                estimates.append({"from_hz": float(f_a), "K": int(K), "K_check": None,
+                                  "change": None, "skipped": skip})
+                warnings.warn(_harmonics.TruncationWarning(
+                    f"sweep: segment from {f_a:.1f} Hz with K = {K}: truncation not "
+                    f"checked ({skip})"))
+                break
+            change, K2 = _truncation_at(ctx, ctx.problem(K), f_a, F_static)
+            estimates.append({"from_hz": float(f_a), "K": int(K), "K_check": int(K2),
+                              "change": None if not math.isfinite(change) else change})
+            if not math.isfinite(change):
+                warnings.warn(_harmonics.TruncationWarning(
+                    f"sweep: segment from {f_a:.1f} Hz with K = {K}: truncation not checked "
+                    f"(no converged point there with K = {K} and {K2})"))
+                break
+            if fixed and change > target:
+                warnings.warn(_harmonics.TruncationWarning(
+                    f"sweep: segment from {f_a:.1f} Hz with K = {K}: truncation estimate "
+                    f"{change:.2%} (RMS mesh force change against K = {K2}; target "
+                    f"{target:.1%}): omit --harmonics to let the sweep choose K"))
+            if change <= target or fixed:
+                break
+            K = K2  # affordable: the check above solved it
+        out.append((f_a, f_b, int(K)))
+    for j, (*_, K) in enumerate(out):
+        log.require_K(j, K)
+    return out, estimates
+
+
+def _truncation_at(ctx, problem, f_hz, F_static) -> tuple[float, int]:
+    """The truncation estimate of the point at ``f_hz`` with ``problem``'s K: Newton from
+    the linear guess, or where that fails, the system without backlash (the check
+    then judges the time-varying stiffness only)."""
+    omega = ctx.omega(f_hz)
+    sol = _newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
+    if int(sol.result) != _hb.CONVERGED and problem.system.has_backlash:
+        lin = dataclasses.replace(problem.system,
+                                  backlash=jnp.zeros_like(problem.system.backlash))
+        problem = _hb.hb_problem(lin, problem.settings)
+        sol = _newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
+    if int(sol.result) != _hb.CONVERGED:
+        return math.inf, 2 * problem.settings.n_harmonics
+    return _harmonics.truncation_change(problem, sol.y, omega, F_static)
 
 
 def _ran_away(problem, y, limit) -> bool:

@@ -2,7 +2,7 @@
 
 Every point is solved twice:
 
-1. harmonic balance with ``K`` from :func:`~gearjax._sweep.harmonics_rule` at that
+1. harmonic balance with ``K`` from :func:`~gearjax._harmonics.harmonics_rule` at that
    point (or the given ``harmonics``); points that share a ``K`` are solved in one
    batched Newton call from the linear, in-contact guess. With backlash a point
    whose Newton fails is re-started as the sweep starts a segment: continuation in
@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import _hb, _sweep
+from . import _harmonics, _hb, _sweep
 from . import _time_domain as td
 from ._errors import fail
 from ._results import sweep_dataset
@@ -190,7 +190,7 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
                             follow: bool = False) -> dict:
     """Harmonic-balance solutions of ``case`` at ``f_hz`` (Hz), in the order given.
 
-    ``K`` per point from :func:`~gearjax._sweep.harmonics_rule` (or ``harmonics``);
+    ``K`` per point from :func:`~gearjax._harmonics.harmonics_rule` (or ``harmonics``);
     one batched Newton solve from the linear guess per distinct ``K``, then, with
     backlash, ``_sweep.backlash_start`` for each point that failed. ``follow``: first
     start each point from the previous converged one (a sweep).
@@ -202,9 +202,15 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
     """
     f_hz = np.asarray(f_hz, dtype=float)
     omegas = case.omega(f_hz)
-    min_k = _hb.highest_excitation(case.system)
+    min_k = _harmonics.excitation_floor(case.system)
+    if harmonics is not None:
+        _harmonics.require_harmonics(case.system, harmonics)
+    cutoff = _harmonics.response_cutoff_hz(case.system)
     ks = np.array([harmonics if harmonics is not None else
-                   _sweep.harmonics_rule(f / case.mu_ref, min_k) for f in f_hz], dtype=int)
+                   _harmonics.harmonics_rule(f / case.mu_ref, min_k, cutoff_hz=cutoff)
+                   for f in f_hz], dtype=int)
+    for K in np.unique(ks):
+        _harmonics.require_size(case.system, int(K), mu=case.mu)
     P, n, K_max = len(f_hz), case.system.n_dof, int(ks.max())
     X = np.zeros((P, 2 * K_max + 1, n))
     result = np.full(P, _hb.MAX_STEPS)

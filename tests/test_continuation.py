@@ -156,20 +156,20 @@ def test_broyden_step_learns_a_rank_one_jacobian_error():
     assert run(False, 3) > 1e-2 and run(False, 30) < 1e-10
 
 
-def test_single_precision_factors(paper_system):
+def test_single_precision_factors(paper_system_h1):
     """``Settings.single``: the bordered LU in single precision. On the paper gear with
     tooth separation, solves with those factors are a close preconditioner (relative
     error far below the corrector's contraction from Jacobian changes) and the refined
     tangent equals the one from double factors. (The paper sweeps in test_sweep run with
     single factors end to end.)"""
-    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=8))
+    problem = _hb.hb_problem(paper_system_h1, _hb.HarmonicBalance(n_harmonics=8))
     omega_ref = 2 * np.pi * 2000.0 / 7
     param = C.FrequencyParameter(problem=problem, omega_ref=jnp.asarray(omega_ref))
     lam = 3500.0 / 2000.0  # 6% of the mesh samples separated at K = 8
     sol = _hb.solve_hb(problem, lam * omega_ref)
     assert bool(sol.converged)
-    deflection = _hb.mesh_samples(problem, sol.X @ paper_system.W.T, lam * omega_ref)[0]
-    assert np.any(np.abs(np.asarray(deflection)) < np.asarray(paper_system.backlash)[:, None])
+    deflection = _hb.mesh_samples(problem, sol.X @ paper_system_h1.W.T, lam * omega_ref)[0]
+    assert np.any(np.abs(np.asarray(deflection)) < np.asarray(paper_system_h1.backlash)[:, None])
     rng = np.random.default_rng(0)
     ty0, tlam0 = jnp.asarray(rng.normal(size=sol.y.size)), 1.0
     rhs = jnp.asarray(rng.normal(size=sol.y.size + 1))

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import gearjax as gj
-from gearjax import _continuation as C, _hb, _sweep
+from gearjax import _continuation as C, _harmonics, _hb, _sweep
 from gearjax._responses import mesh_responses, static_mesh_forces
 
 
@@ -76,7 +76,8 @@ def test_time_sample_rule_paper_with_separation(paper_system):
 def test_harmonics_rule_doubling_changes_rms_by_less_than_half_a_percent(paper_system, f_hz):
     # 2000 Hz: K = 64, 4800 Hz: K = 48 (K = 32 would be off by 0.52%), 6000 Hz: K = 32
     linear = dataclasses.replace(paper_system, backlash=jnp.zeros_like(paper_system.backlash))
-    K = _sweep.harmonics_rule(f_hz / 7, _hb.highest_excitation(linear))
+    K = _harmonics.harmonics_rule(f_hz / 7, _hb.highest_excitation(linear),
+                                  cutoff_hz=_harmonics.response_cutoff_hz(linear))
     assert K == {2000.0: 64, 4800.0: 48, 6000.0: 32}[f_hz]
     _, rms, _ = rms_at(linear, f_hz, K)
     _, rms2, _ = rms_at(linear, f_hz, 2 * K)
@@ -87,7 +88,8 @@ def test_harmonics_rule_with_tooth_separation(paper_system):
     # 4000 Hz with the 0.05 mm backlash: the stage-1 ring meshes separate for about 15%
     # of the period; the rule's K = 48 is 0.10% off K = 128 (K = 32: 2.8% off), and
     # doubling it must change the RMS forces by less than 0.5%
-    K = _sweep.harmonics_rule(4000.0 / 7, _hb.highest_excitation(paper_system))
+    K = _harmonics.harmonics_rule(4000.0 / 7, _hb.highest_excitation(paper_system),
+                                  cutoff_hz=_harmonics.response_cutoff_hz(paper_system))
     assert K == 48
     _, rms, sep = rms_at(paper_system, 4000.0, K)
     _, rms2, sep2 = rms_at(paper_system, 4000.0, 2 * K)

@@ -1,7 +1,10 @@
 """Journaled sweeps: the record format, torn and damaged files, refusals, and resuming
 an interrupted sweep to exactly the uninterrupted result."""
 
+import dataclasses
 import json
+import pathlib
+import tempfile
 import warnings
 
 import numpy as np
@@ -13,14 +16,21 @@ from gearjax import _continuation, _journal, _sweep
 from gearjax._cli import main
 
 BAND = dict(from_hz=2400.0, to_hz=2450.0, harmonics=8, max_step_hz=5.0)
-CLI_BAND = ["--from", "2400", "--to", "2450", "--harmonics", "8", "--max-step", "5"]
+# the bundled paper case with one stiffness harmonic (the ``train`` fixture, as a file)
+H1_TOML = pathlib.Path(tempfile.mkdtemp()) / "paper_h1.toml"
+H1_TOML.write_text(gj.bundled_example_path().read_text().replace(
+    "stiffness_harmonics = 4", "stiffness_harmonics = 1", 1))
+CLI_BAND = [str(H1_TOML), "--from", "2400", "--to", "2450", "--harmonics", "8", "--max-step",
+            "5"]
 
 
 @pytest.fixture(scope="module")
 def train():
+    """The paper case with one stiffness harmonic: its excitation reaches harmonic 8 of
+    the base, so these short sweeps may use 8 or 16 harmonics."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train()
+        return dataclasses.replace(gj.load_train(), stiffness_harmonics=1)
 
 
 @pytest.fixture(scope="module")
@@ -230,7 +240,7 @@ def test_cli_resume_consolidates_and_removes_the_journal(capsys, full, tmp_path)
 
 
 @pytest.mark.parametrize("argv, words", [
-    (CLI_BAND[:3] + ["2460"] + CLI_BAND[4:], ["--to = 2450.0", "differs from this run's 2460.0"]),
+    (CLI_BAND[:4] + ["2460"] + CLI_BAND[5:], ["--to = 2450.0", "differs from this run's 2460.0"]),
     (CLI_BAND[:-1] + ["4"], ["--max-step = 5.0", "this run's 4.0"]),
     (CLI_BAND + ["--gear", "second", "--linear"], ["--gear = 'first'", "'second'"]),
 ])
@@ -316,3 +326,28 @@ def test_sweep_results_are_labelled_data_and_read_back_identical(full, tmp_path)
     assert len(df) == ds.sizes["point"] * ds.sizes["mesh"]
     row = df[(df.point == 4) & (df.mesh == "2.sp3")].iloc[0]
     assert row.rms_force == pytest.approx(float(ds.rms_force.sel(mesh="2.sp3")[4]), rel=1e-12)
+
+
+def test_journal_lock_is_reentrant_and_held_by_the_writer(tmp_path):
+    """The command line locks a journal before the sweep opens its Writer on it (the
+    same process: re-entrant); the lock file goes with the last hold, and a lock file
+    left by a dead process (no OS lock on it) is taken over."""
+    path = tmp_path / "r.nc.journal"
+    lock_file = _journal.lock_path(path)
+    assert lock_file.name == "r.nc.journal.lock" and _journal.holder(path) is None
+    with _journal.lock(path):
+        assert lock_file.read_text().strip() == str(__import__("os").getpid())
+        with _journal.Writer.create(path, _journal.header("test", {})) as w:
+            w.append({"i": 0})
+        assert lock_file.exists()  # still held by the outer lock
+        assert _journal.holder(path) is None  # this process's own hold is no refusal
+        assert len(_journal.read(path)[1]) == 1
+    assert not lock_file.exists()
+    with _journal.Writer.append_to(path, path.stat().st_size) as w:
+        assert lock_file.exists()
+        w.append({"i": 1})
+    assert not lock_file.exists()
+    lock_file.write_text("999999\n")  # stale: its process died (kill -9)
+    with _journal.lock(path):
+        assert _journal.holder(path) is None
+    assert not lock_file.exists() and len(_journal.read(path)[1]) == 2

@@ -148,7 +148,8 @@ static_forces = jax.jit(gj.static_mesh_forces)
 def paper():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", gj.GeometryWarning)
-        system = gj.assemble(gj.load_train())
+        # one stiffness harmonic: the excitation reaches harmonic 8 (<= K = 16)
+        system = gj.assemble(dataclasses.replace(gj.load_train(), stiffness_harmonics=1))
     problem = problem_of(system, SETTINGS)
     sol = solve(problem, OMEGA)
     assert int(sol.result) == _hb.CONVERGED

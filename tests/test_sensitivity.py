@@ -1,8 +1,9 @@
 """Sensitivities by implicit differentiation against finite differences, refusal at folds,
 and the ``sensitivity`` command.
 
-Small harmonics (K = 8) keep this fast: the check is self-consistency of the harmonic
-balance at that K (implicit derivative = derivative of the re-solved response)."""
+Small harmonics (K = 8, with one stiffness harmonic so that K holds the excitation) keep
+this fast: the check is self-consistency of the harmonic balance at that K (implicit
+derivative = derivative of the re-solved response)."""
 
 import json
 
@@ -22,8 +23,9 @@ PATHS = ("1.mesh_stiffness.sun", "2.inertia.sun", "1.inertia.planet", "2.sun_rin
 
 
 @pytest.fixture(scope="module")
-def train():
-    return gj.load_train(gj.bundled_example_path())
+def train(paper_train_h1):
+    """The paper case with one stiffness harmonic: K = 8 holds its excitation."""
+    return paper_train_h1
 
 
 def finite_differences(train, result, linear):
@@ -146,8 +148,9 @@ def run(capsys, *argv):
     return code, out, err
 
 
-def test_cli_json_ranked(capsys, backlash):
-    code, out, _ = run(capsys, "sensitivity", "--at", str(AT), "--harmonics", str(K),
+def test_cli_json_ranked(capsys, backlash, paper_toml_h1):
+    code, out, _ = run(capsys, "sensitivity", str(paper_toml_h1), "--at", str(AT),
+                       "--harmonics", str(K),
                        "--vary", *PATHS, "--json")
     assert code == 0
     data = json.loads(out)
@@ -181,7 +184,7 @@ def test_cli_bad_input(capsys, argv, field):
     assert len(errors) == 1 and field in errors[0] and "Traceback" not in err
 
 
-def test_cli_not_converged(capsys, monkeypatch):
+def test_cli_not_converged(capsys, monkeypatch, paper_toml_h1):
     solve = S._GearPoint.solve
 
     def failing(self, f_hz, X0=None):
@@ -189,8 +192,8 @@ def test_cli_not_converged(capsys, monkeypatch):
         return eqx.tree_at(lambda s: s.result, sol, jnp.asarray(_hb.MAX_STEPS))
 
     monkeypatch.setattr(S._GearPoint, "solve", failing)
-    code, out, err = run(capsys, "sensitivity", "--at", str(AT), "--harmonics", str(K),
-                         "--vary", *PATHS, "--json")
+    code, out, err = run(capsys, "sensitivity", str(paper_toml_h1), "--at", str(AT),
+                         "--harmonics", str(K), "--vary", *PATHS, "--json")
     assert code == 3
     data = json.loads(out)  # no NaN: json.loads would accept it, so check the text
     assert "NaN" not in out and data["value"] is None
@@ -201,12 +204,13 @@ def test_cli_not_converged(capsys, monkeypatch):
 # ------------------------------------------------------------------- stage phase
 
 
-def test_stage_phase_derivative_resolved_and_a_time_shift(train):
+def test_stage_phase_derivative_resolved_and_a_time_shift():
     # A stage phase shifts one stage's excitation in time. The stage-1 meshes vary at
     # 7 h and the stage-2 meshes at 8 h times the base frequency, so the two stages'
     # responses only meet in combination tones; K = 8 keeps h = 1 of each and the
     # derivative is round-off (~1e-13), K = 32 resolves every stiffness harmonic
     # (H = 4: orders up to 32) and the sweep's rule gives K = 48 at 3000 Hz.
+    train = gj.load_train(gj.bundled_example_path())  # H = 4
     paths = ("2.stage_phase_deg", "1.stage_phase_deg")
     result = S.sensitivity(train, at_hz=AT, paths=paths, harmonics=32, linear=True)
     assert result.ok, result.message

@@ -308,7 +308,7 @@ def test_paper_gear_at_3khz(paper_system):
     pair (1e2 N m/rad housing springs) recognised and excluded, the solution stable. The
     excluded Floquet modes are the model's rigid mode (share 1 - 1e-9, every other mode
     1e-7 or less) and strain no mesh (7.5e-5, every other mode 0.4 or more)."""
-    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=16))
+    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=32))
     omega = 2 * np.pi * 3000 / 7
     sol = jax.jit(_hb.solve_hb)(problem, omega)
     assert int(sol.result) == _hb.CONVERGED
@@ -339,21 +339,22 @@ def test_paper_gear_at_3khz(paper_system):
 
 
 def test_attractor_past_the_fold_is_stable_whatever_its_rigid_pair(paper_system):
-    """Past the 3.27 kHz fold (0.05 mm backlash, K = 16, 3306.43 Hz) a time integration
+    """Past the 3.27 kHz fold (0.05 mm backlash, K = 32, 3306.43 Hz) a time integration
     from the static contact state settles on an orbit, and harmonic balance from its
-    harmonics converges: an attractor. Its near-rigid pair lies 1.5e-6 outside the unit
-    circle (a parametric coupling through its mesh strain of 1.6e-4), more than the
-    verdict's margin of 1e-6; every other multiplier has modulus 0.12. The pair is the
-    model's rigid mode (share 1 - 2e-8, the others 1.2e-5 at most), so it is excluded and
-    the verdict is stable, as the integration found. (A margin on ``|mu| - 1`` for
-    mesh-free modes called this orbit unstable.)"""
-    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=16))
+    harmonics converges: an attractor. Its near-rigid pair lies 6e-7 outside the unit
+    circle (a parametric coupling through its mesh strain; the same at K = 48 and 64, and
+    1.5e-6, beyond the verdict's margin of 1e-6, at K = 16, a balance without the
+    stiffness's upper harmonics); every other multiplier has modulus 0.12. The pair is
+    the model's rigid mode (share 1 - 2e-8, the others 1.2e-5 at most), so it is excluded
+    and the verdict is stable, as the integration found. (A margin on ``|mu| - 1`` for
+    mesh-free modes called such an orbit unstable.)"""
+    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=32))
     omega = 2 * np.pi * 3306.43 / 7
     sol = _sweep.settled_start(problem, omega)
     assert int(sol.result) == _hb.CONVERGED
     st = stability(problem, sol.X, omega)
     mu, excluded = np.abs(np.asarray(st.multipliers)), np.asarray(st.excluded)
-    assert excluded.sum() == 2 and np.all(mu[excluded] > 1 + 1e-6)
+    assert excluded.sum() == 2 and np.all(mu[excluded] > 1)
     assert np.all(np.asarray(st.rigid_share)[excluded] > 1 - 1e-6)
     assert np.all(np.asarray(st.rigid_share)[~excluded] < 1e-3)
     assert bool(st.stable) and float(st.max_abs) < 0.2
@@ -365,7 +366,7 @@ def test_sweep_post_processing_in_threads_matches_stability(paper_system):
     by point (with the sweep's Floquet steps), and no LAPACK call in the threaded
     programs (jaxlib 0.10's CPU LAPACK kernels can deadlock XLA's thread pool when
     several run at once)."""
-    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=16))
+    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=32))
     # 2 chunks, one padded; the linear orbits are unstable in the parametric instability
     omegas = 2 * np.pi * np.r_[np.linspace(2500.0, 4000.0, 6), np.linspace(6700, 6880, 5)] / 7
     Xs = jnp.stack([_hb.linear_guess(problem, w).reshape(problem.shape) * problem.x_scale
@@ -396,7 +397,7 @@ def test_sweep_post_processing_streamed_equals_batch(paper_system):
     the continuation finds them (``_sweep._PostStream``) and the rest at the end: the
     rows equal those of the whole segment at once, bit for bit, however the points came
     in (here 3 at a time, 11 points: one chunk streamed, one padded at the end)."""
-    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=16))
+    problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=32))
     omegas = 2 * np.pi * np.r_[np.linspace(2500.0, 4000.0, 6), np.linspace(6700, 6880, 5)] / 7
     ys = [_hb.linear_guess(problem, w) for w in omegas]
     pts = [{"y": np.asarray(y), "lam": float(w) / 2.0} for y, w in zip(ys, omegas)]
