@@ -25,6 +25,7 @@ import dataclasses
 import functools
 import json
 import math
+import numbers
 import os
 import pathlib
 import sys
@@ -867,22 +868,25 @@ def _check_arguments(from_hz, to_hz, *, eta, smoothing, harmonics, max_step_hz, 
     """Refuse arguments that cannot describe a sweep, before any work (``TrainError``
     named after the command-line flags)."""
     def integer(value) -> bool:
-        return isinstance(value, int | np.integer) and not isinstance(value, bool)
+        return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+    def real(value) -> bool:
+        return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
     for name, f in (("--from", from_hz), ("--to", to_hz)):
-        if not (isinstance(f, int | float) and f > 0 and math.isfinite(f)):
+        if not (real(f) and f > 0 and math.isfinite(f)):
             raise fail("command line", name, f, "must be a positive mesh frequency in Hz")
     if from_hz == to_hz:
         raise fail("command line", "--to", to_hz, "must differ from --from")
     if not integer(eta) or eta < 1:
         raise fail("command line", "--eta", eta, "must be an integer >= 1")
-    if not (isinstance(smoothing, int | float) and 0.0 <= smoothing < 1.0):
+    if not (real(smoothing) and 0.0 <= smoothing < 1.0):
         raise fail("command line", "--smoothing", smoothing,
                    "must be >= 0 (0: exact backlash) and < 1 (relative to the backlash)")
     if harmonics is not None and (not integer(harmonics) or harmonics < 1):
         raise fail("command line", "--harmonics", harmonics, "must be an integer >= 1")
-    if max_step_hz is not None and not (isinstance(max_step_hz, int | float)
-                                        and max_step_hz > 0 and math.isfinite(max_step_hz)):
+    if max_step_hz is not None and not (real(max_step_hz) and max_step_hz > 0
+                                        and math.isfinite(max_step_hz)):
         raise fail("command line", "--max-step", max_step_hz,
                    "must be a positive frequency step in Hz (omit it for 1/100 of the band)")
     if not integer(points) or points < 2:
@@ -893,7 +897,7 @@ def _check_arguments(from_hz, to_hz, *, eta, smoothing, harmonics, max_step_hz, 
 
 def _checked_segments(ctx, log, segments, F_static, *, fixed: bool, mu):
     """The segments with K checked a posteriori, and the estimates ``[{"from_hz", "K",
-    "change", "K_check"}]``.
+    "change", "K_check", "backlash"}]`` (``backlash``: whether the checked point had it).
 
     At each segment's first frequency the point is solved with K and with 2K
     (:func:`gearjax._harmonics.truncation_change`); where the relative change of a
@@ -914,9 +918,10 @@ def _checked_segments(ctx, log, segments, F_static, *, fixed: bool, mu):
                     f"sweep: segment from {f_a:.1f} Hz with K = {K}: truncation not "
                     f"checked ({skip})"))
                 break
-            change, K2 = _truncation_at(ctx, ctx.problem(K), f_a, F_static)
+            change, K2, backlash = _truncation_at(ctx, ctx.problem(K), f_a, F_static)
             estimates.append({"from_hz": float(f_a), "K": int(K), "K_check": int(K2),
-                              "change": None if not math.isfinite(change) else change})
+                              "change": None if not math.isfinite(change) else change,
+                              "backlash": backlash})
             if not math.isfinite(change):
                 warnings.warn(_harmonics.TruncationWarning(
                     f"sweep: segment from {f_a:.1f} Hz with K = {K}: truncation not checked "
@@ -936,10 +941,11 @@ def _checked_segments(ctx, log, segments, F_static, *, fixed: bool, mu):
     return out, estimates
 
 
-def _truncation_at(ctx, problem, f_hz, F_static) -> tuple[float, int]:
-    """The truncation estimate of the point at ``f_hz`` with ``problem``'s K: Newton from
-    the linear guess, or where that fails, the system without backlash (the check
-    then judges the time-varying stiffness only)."""
+def _truncation_at(ctx, problem, f_hz, F_static) -> tuple[float, int, bool]:
+    """``(change, 2K, with backlash)``: the truncation estimate of the point at ``f_hz``
+    with ``problem``'s K, Newton from the linear guess; where that fails with backlash
+    (tooth separation far from contact), of the system without backlash (the check then
+    judges the time-varying stiffness only, and says so: ``False``)."""
     omega = ctx.omega(f_hz)
     sol = _newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
     if int(sol.result) != _hb.CONVERGED and problem.system.has_backlash:
@@ -947,9 +953,10 @@ def _truncation_at(ctx, problem, f_hz, F_static) -> tuple[float, int]:
                                   backlash=jnp.zeros_like(problem.system.backlash))
         problem = _hb.hb_problem(lin, problem.settings)
         sol = _newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
+    backlash = problem.system.has_backlash
     if int(sol.result) != _hb.CONVERGED:
-        return math.inf, 2 * problem.settings.n_harmonics
-    return _harmonics.truncation_change(problem, sol.y, omega, F_static)
+        return math.inf, 2 * problem.settings.n_harmonics, backlash
+    return (*_harmonics.truncation_change(problem, sol.y, omega, F_static), backlash)
 
 
 def _ran_away(problem, y, limit) -> bool:

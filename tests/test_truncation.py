@@ -132,8 +132,15 @@ def test_truncation_check_raises_K_where_the_first_choice_is_short(train, monkey
     assert first["K"] == 32 and first["K_check"] == 64 and first["change"] > 0.005
     assert second["K"] == 64 and second["K_check"] == 128 and second["change"] < 0.005
     assert [k for *_, k in r.segments] == [64] and np.all(r.dataset["harmonics"].values == 64)
-    # a fixed K is the user's: checked, kept, warned about with the number
-    with pytest.warns(_harmonics.TruncationWarning, match=r"K = 32: truncation estimate "
-                      r"\d\.\d\d% .*against K = 64; target 0\.5%\): omit --harmonics"):
-        fixed = _sweep.sweep(train, "first", 4000, 4004, max_points=3, harmonics=32)
-    assert [k for *_, k in fixed.segments] == [32]
+
+
+def test_a_fixed_K_is_checked_kept_and_warned_about(paper_train_h1):
+    """The user's K is theirs: checked, kept, and where the estimate exceeds the target,
+    warned about with the number (one stiffness harmonic, K = 8 at 2.4 kHz: about 4.6%)."""
+    with pytest.warns(_harmonics.TruncationWarning, match=r"K = 8: truncation estimate "
+                      r"\d\.\d\d% .*against K = 16; target 0\.5%\): omit --harmonics"):
+        fixed = _sweep.sweep(paper_train_h1, "first", 2400, 2410, linear=True, points=2,
+                             harmonics=8)
+    assert [k for *_, k in fixed.segments] == [8]
+    (check,) = json.loads(fixed.dataset.attrs["solver"])["truncation"]
+    assert check["K"] == 8 and check["K_check"] == 16 and check["change"] > 0.005
