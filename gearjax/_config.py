@@ -1,8 +1,50 @@
-"""float64 is switched on when gearjax is imported: tight Newton tolerances stall in float32."""
+"""Set when gearjax is imported: float64 (tight Newton tolerances stall in float32), and
+JAX's persistent compilation cache, so that a second run reuses the programs the first
+one compiled.
+
+The cache lives in ``$XDG_CACHE_HOME/gearjax/jax`` (``~/.cache/gearjax/jax`` by
+default), never inside the package or the working directory, and holds at most
+``CACHE_MAX_BYTES`` (least recently used entries go first). ``GEARJAX_CACHE_DIR=DIR``
+moves it; ``GEARJAX_CACHE_DIR=0`` (or empty) switches it off; a cache directory set
+through JAX itself (``JAX_COMPILATION_CACHE_DIR`` or ``jax.config``) is left as it is.
+"""
+
+import os
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
+
+CACHE_ENV = "GEARJAX_CACHE_DIR"
+CACHE_MAX_BYTES = 2 * 1024**3
+
+
+def cache_dir() -> str | None:
+    """The compilation cache directory gearjax sets up (``None``: switched off, or JAX's
+    own setting is kept)."""
+    value = os.environ.get(CACHE_ENV)
+    if value is not None:
+        return None if value.strip() in ("", "0") else os.path.expanduser(value)
+    if jax.config.jax_compilation_cache_dir:
+        return None
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "gearjax", "jax")
+
+
+def _enable_cache() -> None:
+    path = cache_dir()
+    if path is None:
+        return
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError:  # a read-only home: run without the cache
+        return
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_compilation_cache_max_size", CACHE_MAX_BYTES)
+
+
+_enable_cache()
 
 
 def require_x64() -> None:

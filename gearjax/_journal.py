@@ -365,7 +365,7 @@ class Writer:
                            f"cannot be written ({e.strerror or e})") from None
             writer = cls(path, file, held)
             writer.append(head)
-            _sync_directory(path)
+            sync_directory(path)
         except BaseException:
             held.release()
             raise
@@ -408,8 +408,9 @@ class Writer:
         self.close()
 
 
-def _sync_directory(path: pathlib.Path) -> None:
-    """Make the new file's directory entry durable (best effort: not on every OS)."""
+def sync_directory(path: pathlib.Path) -> None:
+    """Make the new file ``path``'s directory entry durable (best effort: not on every
+    OS)."""
     try:
         fd = os.open(path.parent if str(path.parent) else ".", os.O_RDONLY)
     except OSError:

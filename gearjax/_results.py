@@ -52,6 +52,7 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
+from ._journal import sync_directory
 from ._responses import RESPONSE_FIELDS, RESPONSE_UNITS, MeshResponses
 from ._system import System
 
@@ -312,21 +313,7 @@ def atomic_path(path):
                 raise OSError(e.errno, e.strerror, str(path)) from e
             raise OSError(str(e).replace(str(tmp), str(path))) from e
         raise
-    _sync_directory(path.parent)
-
-
-def _sync_directory(directory: pathlib.Path) -> None:
-    """Make a renamed file's directory entry durable (best effort: not on every OS)."""
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
+    sync_directory(path)
 
 
 def load_results(path) -> xr.Dataset:

@@ -23,6 +23,18 @@ def _free_compiled_programs():
 
 
 @pytest.fixture(scope="module")
+def paper_train():
+    """The bundled paper case (its geometry warning silenced)."""
+    import warnings
+
+    import gearjax as gj
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gj.GeometryWarning)
+        return gj.load_train()
+
+
+@pytest.fixture(scope="module")
 def paper_system():
     """The assembled ``System`` of the bundled paper case's first gear (its geometry
     warning silenced)."""

@@ -1,5 +1,7 @@
-"""float64 cannot be forgotten: on at import, and solving refuses float32."""
+"""float64 cannot be forgotten: on at import, and solving refuses float32; compiled
+programs are kept between runs in the user's cache directory."""
 
+import os
 import subprocess
 import sys
 
@@ -23,3 +25,36 @@ def test_assembly_refuses_float32():
     out = subprocess.run([sys.executable, "-W", "ignore", "-c", code], capture_output=True,
                          text=True, timeout=120)
     assert "gearjax needs float64" in out.stdout
+
+
+CACHE_PROBE = (
+    "import jax, gearjax\n"
+    "print(jax.config.jax_compilation_cache_dir)\n"
+    "jax.jit(lambda x: x * 2.0 + 1.0)(jax.numpy.arange(3.0)).block_until_ready()\n"
+)
+
+
+def run_probe(**env):
+    out = subprocess.run([sys.executable, "-W", "ignore", "-c", CACHE_PROBE],
+                         capture_output=True, text=True, timeout=120,
+                         env={**os.environ, **env})
+    assert out.returncode == 0, out.stderr
+    return out.stdout.strip()
+
+
+def test_compiled_programs_are_kept_in_the_user_cache(tmp_path):
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("GEARJAX_CACHE_DIR", "JAX_COMPILATION_CACHE_DIR")}
+    env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
+    out = subprocess.run([sys.executable, "-W", "ignore", "-c", CACHE_PROBE],
+                         capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
+    cache = tmp_path / "xdg" / "gearjax" / "jax"
+    assert out.returncode == 0 and out.stdout.strip() == str(cache)
+    assert any(cache.iterdir())  # the program was written for the next run
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["xdg"]  # nothing in the cwd
+
+
+def test_cache_moved_or_switched_off(tmp_path):
+    assert run_probe(GEARJAX_CACHE_DIR=str(tmp_path / "c")) == str(tmp_path / "c")
+    assert any((tmp_path / "c").iterdir())
+    assert run_probe(GEARJAX_CACHE_DIR="0") == "None"

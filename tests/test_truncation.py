@@ -4,7 +4,6 @@ harmonics of a sweep are checked a posteriori (gearjax/_harmonics.py)."""
 import json
 import re
 import time
-import warnings
 
 import numpy as np
 import pytest
@@ -21,10 +20,8 @@ PAPER_H4_RE = re.escape(PAPER_H4)
 
 
 @pytest.fixture(scope="module")
-def train():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train()
+def train(paper_train):
+    return paper_train
 
 
 @pytest.fixture(scope="module")
