@@ -194,9 +194,9 @@ def _size(n_bytes: float) -> str:
 
 MAX_CHECK_UNKNOWNS = 16384
 """Largest factorisation (unknowns) the truncation check may solve at 2K: a dense LU of
-2.9e12 floating-point operations and 2 GB a copy, about a minute on two cores. Beyond
-it (or beyond the memory share) the check is skipped and the result says so. A size,
-not a timing: the decision is the same on every run of a machine."""
+2.9e12 floating-point operations and 2 GB a copy. Beyond it (or beyond the memory
+share) the check is skipped and the result says so. A size, not a timing: the decision
+is the same on every run."""
 
 
 def check_affordable(system: System, K: int) -> str | None:
