@@ -112,10 +112,11 @@ def floor_reason(system: System, eta: int = 1) -> str:
 
 
 def factor_unknowns(system: System, K: int) -> int:
-    """Unknowns of the condensed bordered factorisation, ``(2K+1) r + 1``."""
-    W = np.asarray(system.W, float)
-    r = int(np.linalg.matrix_rank(W)) if W.size else 0
-    r = r if 0 < r < system.n_dof else system.n_dof
+    """Unknowns of the bordered factorisation, ``(2K+1) r + 1``: ``r`` the motions that
+    deflect a mesh where the solves condense the others out (``_hb.mesh_null_space``),
+    else every degree of freedom."""
+    null = _hb.mesh_null_space(system.W)
+    r = system.n_dof - (0 if null is None else null.shape[1])
     return (2 * K + 1) * r + 1
 
 
@@ -209,39 +210,33 @@ def check_affordable(system: System, K: int) -> str | None:
                 f"{MAX_CHECK_UNKNOWNS}")
     need, avail = memory_bytes(system, K2), available_memory()
     if need > MEMORY_SHARE * avail:
-        return f"a check at K = {K2} would need about {_size(need)} of the {_size(avail)} available"
+        return (f"a check at K = {K2} would need about {_size(need)} of the "
+                f"{_size(avail)} available")
     return None
 
 
-def truncation_change(problem: _hb.HBProblem, y, omega, F_static) -> tuple[float, int]:
+def truncation_change(problem: _hb.HBProblem, wide: _hb.HBProblem, y, omega,
+                      F_static) -> float:
     """The truncation estimate of a converged point: the largest relative change of a
     mesh's RMS alternating force when the point ``y`` (scaled unknowns of ``problem``)
-    at base frequency ``omega`` (rad/s) is solved again with twice the harmonics
-    (Newton from ``y`` padded with zeros). Meshes below ``RMS_FLOOR`` of the largest
-    RMS are judged against that share.
+    at base frequency ``omega`` (rad/s) is solved again with ``wide``, the same problem
+    with twice the harmonics (Newton from ``y`` padded with zeros). Meshes below
+    ``RMS_FLOOR`` of the largest RMS are judged against that share.
 
-    **Returns:** ``(change, K2)``; ``change`` is ``inf`` where the doubled solve does
-    not converge.
+    **Returns:** the change; ``inf`` where the doubled solve does not converge.
     """
-    K = problem.settings.n_harmonics
-    eta = problem.settings.eta
-    K2 = 2 * K
-    wide = _hb.hb_problem(problem.system, _hb.HarmonicBalance(
-        n_harmonics=K2, eta=eta, smoothing=problem.settings.smoothing))
     C, n = problem.shape
-    y2 = np.zeros((2 * K2 + 1, n))
+    y2 = np.zeros(wide.shape)
     y2[:C] = np.asarray(y).reshape(C, n)
-    sol = _newton_jit(wide, jnp.asarray(omega, float), jnp.asarray(y2.reshape(-1)))
+    sol = _hb.newton_jit(wide, jnp.asarray(omega, float), jnp.asarray(y2.reshape(-1)))
     if int(sol.result) != _hb.CONVERGED:
-        return math.inf, K2
+        return math.inf
     X = jnp.asarray(np.asarray(y).reshape(C, n)) * problem.x_scale
     a = np.asarray(mesh_responses(problem, X, omega, F_static).rms_force)
     b = np.asarray(mesh_responses(wide, sol.X, omega, F_static).rms_force)
     floor = RMS_FLOOR * max(float(np.max(b)), 1e-300)
-    return float(np.max(np.abs(a - b) / np.maximum(b, floor))), K2
+    return float(np.max(np.abs(a - b) / np.maximum(b, floor)))
 
-
-_newton_jit = jax.jit(_hb.newton)
 
 
 class TruncationWarning(UserWarning):

@@ -363,6 +363,10 @@ def newton(problem: HBProblem, omega, y0: Array) -> HBSolution:
         _bordered.jacobian_factors(problem, y, omega), -r))
 
 
+newton_jit = jax.jit(newton)
+""":func:`newton`, compiled (one cache of programs for every caller)."""
+
+
 def solve_linear(problem: HBProblem, omega, y0: Array | None = None) -> HBSolution:
     """The periodic solution of a system without backlash (jit-compatible).
 

@@ -380,6 +380,7 @@ def _linear_segments(ctx, walk, log, points, progress) -> None:
     for j, (f_a, f_b, K) in enumerate(walk.segments):
         problem = ctx.problem(K)
         walk.problems.append(problem)
+        log.require_K(j, K)
         if log.batch(j) is None:
             n = max(2, round(points * abs(f_b - f_a) / abs(span)))
             freqs = np.linspace(f_a, f_b, n, endpoint=(f_b == walk.segments[-1][1]))
@@ -407,6 +408,7 @@ def _walk_segment(ctx, walk, log, post, *, progress=None, entered=None, key=None
     name = j if key is None else key(j)
     problem = ctx.problem(K)
     walk.problems.append(problem)
+    log.require_K(j, K)
     omega_ref = ctx.omega_ref
     direction = math.copysign(1.0, ctx.to_hz - ctx.from_hz)
     if log.end(j) is None:
@@ -687,8 +689,9 @@ class _SweepLog:
         return self._other.get(("batch", j))
 
     def require_K(self, j: int, K: int) -> None:
-        """Refuse a journal whose segment ``j`` was solved with another K than ``K`` (the
-        truncation check of this run decided otherwise: another machine's round-off)."""
+        """Refuse a journal whose segment ``j`` was solved with another K than this run's
+        ``K`` for it (e.g. a truncation check that decided otherwise on another machine),
+        before any of its records is replayed."""
         recs = self.points(j)[:1] + [r for r in [self.batch(j)] if r is not None]
         for rec in recs:
             if int(rec["K"]) != int(K):
@@ -765,8 +768,6 @@ def _continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap
         return _continuation.continue_branch(param, y, lam, lam_b, settings, max_points=cap,
                                              on_point=on_point).stop
     last = have[-1]
-    if last["K"] != K:
-        raise fail(None, "journal", last["K"], f"segment {j} has K = {K} in this run")
     # why continue_branch stopped after the last saved point, in its order of checks
     if (last["lam"] - lam_b) * direction >= 0:
         return "reached_end"
@@ -904,8 +905,8 @@ def _checked_segments(ctx, log, segments, F_static, *, fixed: bool, mu):
     mesh's RMS force exceeds ``TRUNCATION_TARGET`` K doubles (while the check at twice
     it is affordable, :func:`gearjax._harmonics.check_affordable`) and the check repeats.
     A ``fixed`` K (the user's) is checked, warned about and kept. A resumed run checks
-    again (the same decisions on the same machine); a journal whose records were solved
-    with another K is refused (:meth:`_SweepLog.require_K`)."""
+    again (the same decisions on the same machine); a journal segment solved with
+    another K is refused where the walk reaches it (:meth:`_SweepLog.require_K`)."""
     target = _harmonics.TRUNCATION_TARGET
     out, estimates = [], []
     for f_a, f_b, K in segments:
@@ -918,7 +919,8 @@ def _checked_segments(ctx, log, segments, F_static, *, fixed: bool, mu):
                     f"sweep: segment from {f_a:.1f} Hz with K = {K}: truncation not "
                     f"checked ({skip})"))
                 break
-            change, K2, backlash = _truncation_at(ctx, ctx.problem(K), f_a, F_static)
+            K2 = 2 * K
+            change, backlash = _truncation_at(ctx, K, f_a, F_static)
             estimates.append({"from_hz": float(f_a), "K": int(K), "K_check": int(K2),
                               "change": None if not math.isfinite(change) else change,
                               "backlash": backlash})
@@ -936,27 +938,27 @@ def _checked_segments(ctx, log, segments, F_static, *, fixed: bool, mu):
                 break
             K = K2  # affordable: the check above solved it
         out.append((f_a, f_b, int(K)))
-    for j, (*_, K) in enumerate(out):
-        log.require_K(j, K)
     return out, estimates
 
 
-def _truncation_at(ctx, problem, f_hz, F_static) -> tuple[float, int, bool]:
-    """``(change, 2K, with backlash)``: the truncation estimate of the point at ``f_hz``
-    with ``problem``'s K, Newton from the linear guess; where that fails with backlash
-    (tooth separation far from contact), of the system without backlash (the check then
-    judges the time-varying stiffness only, and says so: ``False``)."""
+def _truncation_at(ctx, K: int, f_hz, F_static) -> tuple[float, bool]:
+    """``(change, with backlash)``: the truncation estimate of the point at ``f_hz`` with
+    K against 2K (the sweep's problems of those K), Newton from the linear guess; where
+    that fails with backlash (tooth separation far from contact), of the system without
+    backlash (the check then judges the time-varying stiffness only, and says so:
+    ``False``)."""
     omega = ctx.omega(f_hz)
+    problem, wide = ctx.problem(K), ctx.problem(2 * K)
     sol = _newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
     if int(sol.result) != _hb.CONVERGED and problem.system.has_backlash:
         lin = dataclasses.replace(problem.system,
                                   backlash=jnp.zeros_like(problem.system.backlash))
-        problem = _hb.hb_problem(lin, problem.settings)
+        problem, wide = (_hb.hb_problem(lin, p.settings) for p in (problem, wide))
         sol = _newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
     backlash = problem.system.has_backlash
     if int(sol.result) != _hb.CONVERGED:
-        return math.inf, 2 * problem.settings.n_harmonics, backlash
-    return (*_harmonics.truncation_change(problem, sol.y, omega, F_static), backlash)
+        return math.inf, backlash
+    return _harmonics.truncation_change(problem, wide, sol.y, omega, F_static), backlash
 
 
 def _ran_away(problem, y, limit) -> bool:
@@ -1118,7 +1120,7 @@ def resize_harmonics(y, K_old: int, problem):
     return jnp.asarray(new.reshape(-1))
 
 
-_newton_jit = jax.jit(_hb.newton)
+_newton_jit = _hb.newton_jit
 
 
 def _backlash_homotopy(problem, omega):

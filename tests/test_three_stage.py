@@ -37,11 +37,11 @@ def linear_system(train):
 
 def reference_rms(system, f_hz, K):
     """RMS mesh forces (N) of the linear harmonic balance with ``K`` harmonics at
-    stage-A mesh frequency ``f_hz``: Newton from the linear guess, with the truncation
-    check's jitted Newton (compiled already where the sweep solved that K)."""
+    stage-A mesh frequency ``f_hz``: Newton from the linear guess, with the jitted Newton
+    the sweep and its truncation check use (compiled already where they solved that K)."""
     problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=K))
     omega = 2 * math.pi * f_hz / MU_REF
-    sol = _harmonics._newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
+    sol = _hb.newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
     assert int(sol.result) == _hb.CONVERGED
     return np.asarray(mesh_responses(problem, sol.X, omega, static_mesh_forces(system)).rms_force)
 

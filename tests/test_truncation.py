@@ -89,7 +89,8 @@ def test_memory_rule_refuses_with_mu_harmonics_and_memory(train, capsys, monkeyp
     # 5000 harmonics: a factorisation of 100011 unknowns, about 320 GB
     code = main(["sweep", "--from", "4000", "--to", "4100", "--harmonics", "5000"])
     line = one_error_line(capsys.readouterr().err)
-    assert code == 2 and "mu = [7, 8]: 5000 harmonics make a factorisation of 100011 unknowns" in line
+    assert code == 2
+    assert "mu = [7, 8]: 5000 harmonics make a factorisation of 100011 unknowns" in line
     assert "GB of the" in line and "gearjax simulate" in line
     # the same rule on every path, against the memory this machine has
     monkeypatch.setattr(_harmonics, "available_memory", lambda: 5 * 10**7)
