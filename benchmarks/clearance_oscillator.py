@@ -23,7 +23,6 @@ import numpy as np
 import scipy.integrate
 
 import gearjax as gj
-from gearjax import _aft, _continuation, _hb
 
 
 def oscillator():
@@ -32,14 +31,14 @@ def oscillator():
 
 
 def hb_sweep(K: int, T: int, repeats: int):
-    problem = _hb.hb_problem(oscillator(), _hb.HarmonicBalance(n_harmonics=K, n_time=T))
-    param = _continuation.FrequencyParameter(problem=problem, omega_ref=jnp.asarray(1.0))
-    settings = _continuation.Settings(step=0.05, max_step=0.3, max_dlambda=0.02)
+    problem = gj.hb_problem(oscillator(), gj.HarmonicBalance(n_harmonics=K, n_time=T))
+    param = gj.FrequencyParameter(problem=problem, omega_ref=jnp.asarray(1.0))
+    settings = gj.ContinuationSettings(step=0.05, max_step=0.3, max_dlambda=0.02)
 
     @jax.jit
     def run(omega0):
-        y0 = _hb.solve_hb(problem, omega0).y
-        return _continuation.continue_compiled(param, y0, omega0, 1.5, settings, 400)
+        y0 = gj.solve_hb(problem, omega0).y
+        return gj.continue_compiled(param, y0, omega0, 1.5, settings, 400)
 
     t0 = time.perf_counter()
     out = jax.block_until_ready(run(0.5))
@@ -52,12 +51,12 @@ def hb_sweep(K: int, T: int, repeats: int):
     ys, lams, folds, fold_lams, n, code = (np.asarray(v) for v in out)
     n = int(n)
     X = ys[:n].reshape(n, 2 * K + 1, 1) * np.asarray(problem.x_scale)
-    x = np.asarray(jax.vmap(lambda c: _aft.synthesis(c, T))(jnp.asarray(X)))[..., 0]
+    x = np.asarray(jax.vmap(lambda c: gj.aft_synthesis(c, T))(jnp.asarray(X)))[..., 0]
     amplitude = (x.max(1) - x.min(1)) / 2
     return {
         "points": n,
-        "stop": _continuation.STOP_REASONS[int(code)],
-        "folds": _continuation.distinct_folds(fold_lams[:n][folds[:n]]),
+        "stop": gj.STOP_REASONS[int(code)],
+        "folds": gj.distinct_folds(fold_lams[:n][folds[:n]]),
         "max_amp": float(amplitude.max()),
         "compile_s": compile_s,
         "ms_per_point": 1e3 * statistics.median(times) / n,

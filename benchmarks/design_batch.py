@@ -2,14 +2,14 @@
 
 Each design is an admissible planet set of the paper train's stage 1 (first gear) with
 a sun-ring phase per stage; each design sweep is the linear, time-varying harmonic
-balance (``gearjax._design``) at ``--frequencies`` reference-stage mesh frequencies
+balance (``gearjax.design_sweep``) at ``--frequencies`` reference-stage mesh frequencies
 from 2 to 15 kHz, RMS mesh force of every mesh. Both methods run the same compiled
 point solve; the loop calls the compiled one-design function once per design (the
 way a script without batching would). Prints compile time, the median of
 ``--repeats`` runs, design sweeps per minute and the ratio, and the largest relative
 difference between the two. Runs on whatever JAX uses by default (CPU, or a GPU
 when one is present; nothing here needs one); ``--shard`` also spreads the batch over
-every device (:func:`gearjax._design.batched_rms`).
+every device (:func:`gearjax.batched_rms`).
 
     python benchmarks/design_batch.py [--designs 32] [--frequencies 8] [--harmonics 16]
 """
@@ -27,10 +27,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import gearjax as gj
-from gearjax import _hb
-from gearjax import _design as D
-from gearjax import _optimize as O
-from gearjax._sensitivity import GearFamily
 
 PATHS = ("1.planet_angles_deg.2", "1.planet_angles_deg.3", "1.planet_angles_deg.4",
          "1.sun_ring_phase_deg", "2.sun_ring_phase_deg")
@@ -61,20 +57,20 @@ def main() -> None:
         warnings.simplefilter("ignore", gj.GeometryWarning)
         train = gj.load_train()
     rng = np.random.default_rng(0)
-    sets = O.admissible_planet_sets(train.stage("1"))
+    sets = gj.admissible_planet_sets(train.stage("1"))
     pick = sets[rng.choice(len(sets), a.designs, replace=False)]
     thetas = np.column_stack([pick[:, 1:], rng.uniform(0, 360, (a.designs, 2))])
-    family = GearFamily.of(train, PATHS, "first", linear=True)
-    settings = _hb.HarmonicBalance(n_harmonics=a.harmonics)
+    family = gj.GearFamily.of(train, PATHS, "first", linear=True)
+    settings = gj.HarmonicBalance(n_harmonics=a.harmonics)
     f = np.geomspace(2000.0, 15000.0, a.frequencies)
     omegas = jnp.asarray(2 * math.pi * f / 7)
     th = jnp.asarray(thetas)
 
     def batched():
-        return D.batched_rms(family, th, omegas, settings)[0]
+        return gj.batched_rms(family, th, omegas, settings)[0]
 
     def looped():
-        return jnp.stack([D.batched_rms(family, th[b:b + 1], omegas, settings)[0][0]
+        return jnp.stack([gj.batched_rms(family, th[b:b + 1], omegas, settings)[0][0]
                           for b in range(a.designs)])
 
     print(f"backend {jax.default_backend()} ({jax.devices()[0].device_kind}, "
@@ -89,7 +85,7 @@ def main() -> None:
     if a.shard:
         devices = jax.devices()
         out_s, first_s, run_s = timed(
-            lambda: D.batched_rms(family, th, omegas, settings, devices=devices)[0], a.repeats)
+            lambda: gj.batched_rms(family, th, omegas, settings, devices=devices)[0], a.repeats)
         rows.append((f"vmapped, sharded on {len(devices)}", first_s - run_s, run_s))
         rel_s = float(jnp.max(jnp.abs(out_s - out_b) / jnp.abs(out_b)))
     print(f"{'method':>28} {'compile s':>10} {'run s':>9} {'sweeps/min':>11} {'vs loop':>8}")

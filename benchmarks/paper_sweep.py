@@ -35,11 +35,13 @@ import jax.numpy as jnp
 import numpy as np
 
 import gearjax as gj
-from gearjax import _bordered, _hb, _sweep
-from gearjax._assembly import assemble
-from gearjax._plot import plot_sweep
-from gearjax._stability import stability
-from gearjax._sweep import progress_printer, sweep
+from gearjax._engine import bordered as _bordered
+from gearjax._engine import hb as _hb
+from gearjax._studies import sweep as _sweep
+from gearjax._gear.assembly import assemble
+from gearjax._plot.save import plot_sweep
+from gearjax._engine.verdict import stability
+from gearjax._studies.sweep import progress_printer, sweep
 
 
 def _best_of(fn, *args, repeat: int = 5) -> float:
@@ -57,7 +59,7 @@ def breakdown(train, result) -> None:
     """Cost per K, at a point of its first segment (ms, compile excluded): one residual,
     one structured Jacobian, one bordered factorisation + solve of the continuation, done
     dense (the Jacobian, its LU) and condensed to the motions that deflect a mesh
-    (``gearjax._bordered``), the latter also with its LU in single precision (what the
+    (``gearjax._engine.bordered``), the latter also with its LU in single precision (what the
     sweep's continuation does), and one Floquet stability evaluation."""
     ds = result.dataset
     system = assemble(train, "first")
@@ -67,7 +69,7 @@ def breakdown(train, result) -> None:
           f"{'dense LU':>9} {'condensed':>10} {'ratio':>6} {'single':>7} {'stability':>10} "
           f"{'post/pt':>8}"
           f"  (ms, one evaluation; factor + solve of the bordered system, Jacobian included;"
-          f" post/pt: responses + stability of 32 points, {_sweep.post_threads()} threads)")
+          f" post/pt: responses + stability of 32 points, {_sweep.concurrency.threads()} threads)")
     first = {}  # the first segment of each K
     for f_a, f_b, K in result.segments:
         first.setdefault(K, (f_a, f_b))
@@ -86,7 +88,7 @@ def breakdown(train, result) -> None:
         X = y.reshape(problem.shape) * problem.x_scale
         stab = jax.jit(stability)
         F_static = _sweep.static_mesh_forces(system)
-        post = lambda p, X, w: _sweep._point_rows(  # noqa: E731
+        post = lambda p, X, w: _sweep.point_rows(  # noqa: E731
             p, jnp.stack([X] * 32), jnp.full(32, w), np.zeros(32, int), F_static)
         nv = 0 if problem.mesh_null is None else problem.mesh_null.shape[1]
         reduced = (problem.shape[1] - nv) * problem.shape[0]

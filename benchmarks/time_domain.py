@@ -47,11 +47,13 @@ import numpy as np
 import scipy.integrate
 
 import gearjax as gj
-from gearjax import _harmonics, _hb, _sweep
-from gearjax import _time_domain as td
-from gearjax._responses import mesh_responses
-from gearjax._simulate import gear_case
-from gearjax._verify import compare
+from gearjax._studies import harmonics as _harmonics
+from gearjax._engine import hb as _hb
+from gearjax._studies import sweep as _sweep
+from gearjax._engine import time_domain as td
+from gearjax._engine.responses import mesh_responses
+from gearjax._gear.case import gear_case
+from gearjax._studies.verify import compare
 
 SETTINGS = td.TimeDomain()
 
@@ -95,7 +97,7 @@ def harmonic_balance(case, f_hz, repeats):
         ok = np.zeros(len(f_hz), bool)
         for K, problem in problems.items():
             idx = np.flatnonzero(ks == K)
-            sols = _sweep._solve_points(problem, jnp.asarray(omegas[idx]))
+            sols = _sweep.solve_points(problem, jnp.asarray(omegas[idx]))
             ys = [sols.y[j] for j in range(len(idx))]
             codes = np.asarray(sols.result).copy()
             for j, i in enumerate(idx):

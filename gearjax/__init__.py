@@ -1,10 +1,71 @@
 """gearjax: non-linear, time-varying dynamics of compound planetary gear trains in JAX."""
 
 from . import _config  # noqa: F401  (float64 on import)
-from ._assembly import assemble as assemble
-from ._calibrate import CalibrationResult as CalibrationResult, calibrate as calibrate
-from ._campbell import Campbell as Campbell, Crossing as Crossing, campbell as campbell
-from ._design import (
+from ._engine import (
+    AbstractParameter as AbstractParameter,
+    aft_analysis as aft_analysis,
+    aft_synthesis as aft_synthesis,
+    backlash as backlash,
+    bifurcation_kind as bifurcation_kind,
+    bordered_factor as bordered_factor,
+    bordered_solve as bordered_solve,
+    BorderedFactors as BorderedFactors,
+    Branch as Branch,
+    CondensedLU as CondensedLU,
+    contact_state as contact_state,
+    ContinuationSettings as ContinuationSettings,
+    continue_branch as continue_branch,
+    continue_compiled as continue_compiled,
+    distinct_folds as distinct_folds,
+    FactorisedNewton as FactorisedNewton,
+    floquet_multipliers as floquet_multipliers,
+    floquet_steps as floquet_steps,
+    fourier_series as fourier_series,
+    FrequencyParameter as FrequencyParameter,
+    generalized_eigvals as generalized_eigvals,
+    HarmonicBalance as HarmonicBalance,
+    hb_initial_state as hb_initial_state,
+    hb_jacobian as hb_jacobian,
+    hb_newton as hb_newton,
+    hb_problem as hb_problem,
+    hb_residual as hb_residual,
+    HBJacobian as HBJacobian,
+    HBProblem as HBProblem,
+    HBSolution as HBSolution,
+    hill_multipliers as hill_multipliers,
+    implicit_coefficients as implicit_coefficients,
+    in_contact as in_contact,
+    linear_guess as linear_guess,
+    mesh_force as mesh_force,
+    mesh_responses as mesh_responses,
+    mesh_time_history as mesh_time_history,
+    MeshResponses as MeshResponses,
+    ModalResult as ModalResult,
+    mode_classes as mode_classes,
+    modes as modes,
+    monodromy as monodromy,
+    omega_derivative as omega_derivative,
+    responses_from_samples as responses_from_samples,
+    simulate as simulate,
+    simulate_points as simulate_points,
+    simulate_sweep as simulate_sweep,
+    solve_hb as solve_hb,
+    solve_hb_linear as solve_hb_linear,
+    Stability as Stability,
+    stability as stability,
+    static_deflection as static_deflection,
+    static_mesh_forces as static_mesh_forces,
+    STOP_REASONS as STOP_REASONS,
+    System as System,
+    system_from_matrices as system_from_matrices,
+    SystemParameter as SystemParameter,
+    TimeDomain as TimeDomain,
+    Trajectory as Trajectory,
+)
+from ._gear.assembly import assemble as assemble
+from ._gear.calibrate import CalibrationResult as CalibrationResult, calibrate as calibrate
+from ._gear.campbell import Campbell as Campbell, Crossing as Crossing, campbell as campbell
+from ._studies.design import (
     DesignSweep as DesignSweep,
     batched_rms as batched_rms,
     design_mesh as design_mesh,
@@ -16,32 +77,24 @@ from ._errors import (
     TrainError as TrainError,
     TrainWarning as TrainWarning,
 )
-from ._harmonics import TruncationWarning as TruncationWarning
-from ._kinematics import Kinematics as Kinematics, kinematics as kinematics
-from ._mesh import (
-    backlash as backlash,
-    fourier_series as fourier_series,
-    mesh_force as mesh_force,
+from ._studies.harmonics import TruncationWarning as TruncationWarning
+from ._gear.kinematics import Kinematics as Kinematics, kinematics as kinematics
+from ._gear.phasing import (
     phasing_report as phasing_report,
     stiffness_amplitudes as stiffness_amplitudes,
 )
-from ._modal import ModalResult as ModalResult, generalized_eigvals as generalized_eigvals, modes as modes
-from ._optimize import (
+from ._studies.optimize import (
     OptimizeResult as OptimizeResult,
     OptimizeSettings as OptimizeSettings,
-    admissible_planet_sets as admissible_planet_sets,
     optimize as optimize,
     optimize_dataset as optimize_dataset,
 )
-from ._paths import get_path as get_path, set_path as set_path, continuous_paths as continuous_paths
-from ._responses import (
-    MeshResponses as MeshResponses,
-    mesh_responses as mesh_responses,
-    mesh_time_history as mesh_time_history,
-    responses_from_samples as responses_from_samples,
-    static_mesh_forces as static_mesh_forces,
+from ._gear.paths import (
+    get_path as get_path,
+    set_path as set_path,
+    continuous_paths as continuous_paths,
 )
-from ._results import (
+from ._io.results import (
     load_results as load_results,
     mesh_coordinates as mesh_coordinates,
     points_json as points_json,
@@ -49,41 +102,58 @@ from ._results import (
     save_results as save_results,
     sweep_dataset as sweep_dataset,
 )
-from ._stability import floquet_multipliers as floquet_multipliers, hill_multipliers as hill_multipliers, Stability as Stability, stability as stability
-from ._simulate import simulate_gear as simulate_gear
-from ._sweep import SweepResult as SweepResult, sweep as sweep
-from ._sensitivity import (
+from ._studies.simulate import simulate_gear as simulate_gear
+from ._studies.sweep import SweepResult as SweepResult, sweep as sweep
+from ._studies.sensitivity import (
     BandSensitivity as BandSensitivity,
     Sensitivity as Sensitivity,
     band_sensitivity as band_sensitivity,
     sensitivity as sensitivity,
 )
-from ._static import StaticLoads as StaticLoads, static_deflection as static_deflection, static_loads as static_loads
-from ._system import System as System, system_from_matrices as system_from_matrices
-from ._time_domain import (
-    TimeDomain as TimeDomain,
-    Trajectory as Trajectory,
-    contact_state as contact_state,
-    hb_initial_state as hb_initial_state,
-    simulate as simulate,
-    simulate_points as simulate_points,
-    simulate_sweep as simulate_sweep,
-)
-from ._toml_io import (
+from ._gear.static_loads import StaticLoads as StaticLoads, static_loads as static_loads
+from ._gear.toml_io import (
     bundled_example_path as bundled_example_path,
     dumps_train as dumps_train,
     load_train as load_train,
     loads_train as loads_train,
     save_train as save_train,
 )
-from ._train import (
+from ._gear.train import (
     Coupling as Coupling,
     Gear as Gear,
     Housing as Housing,
     Stage as Stage,
     Train as Train,
 )
-from ._validate import geometry_warnings as geometry_warnings, validate_train as validate_train
-from ._verify import VerifyResult as VerifyResult, verify_gear as verify_gear
+from ._gear.validate import (
+    geometry_warnings as geometry_warnings,
+    validate_train as validate_train,
+)
+from ._studies.verify import VerifyResult as VerifyResult, verify_gear as verify_gear
 
-__version__ = "0.1.0"
+from ._gear.paper import TABLE2_KHZ as TABLE2_KHZ, compare_table2 as compare_table2
+from ._gear.planet_sets import admissible_planet_sets as admissible_planet_sets
+from ._gear.case import GearCase as GearCase, gear_case as gear_case
+from ._plot.figures import (
+    campbell_figure as campbell_figure,
+    design_figure as design_figure,
+    recheck_figure as recheck_figure,
+    response_figure as response_figure,
+    separation_figure as separation_figure,
+)
+from ._plot.save import (
+    plot_mode_shapes as plot_mode_shapes,
+    plot_optimize as plot_optimize,
+    plot_points as plot_points,
+    plot_results as plot_results,
+    plot_sweep as plot_sweep,
+    plot_verify as plot_verify,
+)
+from ._studies.optimize import (
+    Recheck as Recheck,
+    optimize_frame as optimize_frame,
+    optimize_json as optimize_json,
+    recheck as recheck,
+)
+from ._studies.sensitivity import GearFamily as GearFamily, sensitivity_json as sensitivity_json
+from ._version import __version__ as __version__

@@ -1,6 +1,10 @@
 """The ``gearjax`` command line (interface.md): info, modes, calibrate, sweep, simulate,
 verify, sensitivity, optimize, plot.
 
+Why this module is long: it is the one module that knows flag names and exit codes, so
+the parser of every command, their handlers and the translation of library errors into
+flag words stay together.
+
 Exit codes: 0 finished; 2 bad input or usage (one line on stderr, no traceback);
 3 finished but nothing converged; 1 an internal error or a problem too large for the
 memory (one line; ``GEARJAX_DEBUG=1`` shows the traceback); 130 interrupted.
@@ -11,6 +15,11 @@ Refuse, don't guess: every output path (``--out``, ``--out-train``, ``--plot``,
 ``plot --out``) is checked before any work; results are written atomically; a sweep's
 journal is locked while its run is live, so a second run on the same ``--out`` is
 refused instead of racing the first.
+
+The library speaks in Python terms: an :class:`~gearjax._errors.ArgumentError` names
+the Python argument and writes other arguments as ``` `name` ```; :data:`ARGUMENT_FLAGS`
+translates both into flags here (``command line: --flag = VALUE: RULE``), and the
+backticked names in any other refusal or warning of gearjax's.
 """
 
 from __future__ import annotations
@@ -27,10 +36,43 @@ from fractions import Fraction
 
 import numpy as np
 
-from ._errors import TrainError, TrainWarning, fail, one_line
+from ._errors import (
+    ArgumentError,
+    TrainError,
+    TrainWarning,
+    fail,
+    field_message,
+    one_line,
+)
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_NOT_CONVERGED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 DEBUG_ENV = "GEARJAX_DEBUG"
+
+ARGUMENT_FLAGS = {
+    # every command, and the sweep
+    "gear": "--gear", "stage": "--stage", "linear": "--linear", "harmonics": "--harmonics",
+    "from_hz": "--from", "to_hz": "--to", "eta": "--eta", "max_step_hz": "--max-step",
+    "points": "--points", "max_points": "--max-points", "smoothing": "--smoothing",
+    "resume": "--resume", "journal": "--out",  # the command line keeps it as --out FILE.journal
+    # info
+    "input_rpm": "--input-rpm",
+    # simulate, verify
+    "at_hz": "--at", "tol_linear": "--tol-linear", "tol_nonlinear": "--tol-nonlinear",
+    "curve": "--curve",
+    # calibrate (gearjax._gear.calibrate)
+    "targets_hz": "--targets-hz", "free": "--free", "out_train": "--out-train",
+    # sensitivity
+    "response": "--response", "mesh": "--mesh", "paths": "--vary",
+    # optimize (and its OptimizeSettings fields)
+    "band_hz": "--band", "vary": "--vary", "proxy_points": "--proxy-points",
+    "phase_grid": "--phase-grid", "screen": "--screen", "screen_points": "--points",
+    "final_points": "--final-points", "nonlinear": "--nonlinear",
+    "nonlinear_harmonics": "--harmonics", "relax_iterations": "--relax-iterations",
+    "passes": "--passes",
+    # plot
+    "what": "--what", "out": "--out",
+}
+"""The flag of each Python argument name the library's errors use."""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -39,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except _UsageError as e:
         return _refuse(str(e))
+    args.command_line = _command_line(argv)
     if args.command is None:
         return _refuse(f"command line: COMMAND = (missing): give one of "
                        f"{', '.join(_COMMANDS)} (gearjax --help describes them)")
@@ -50,12 +93,12 @@ def main(argv: list[str] | None = None) -> int:
             warnings.showwarning = _warning_printer(notes, warnings.showwarning)
             if not getattr(args, "needs_train", True):  # e.g. plot: a results file, no train
                 return args.run(args, None, notes)
-            from ._toml_io import load_train
+            from ._gear.toml_io import load_train
 
             train = load_train(args.train)
             return args.run(args, train, notes)
     except TrainError as e:
-        return _refuse(str(e))
+        return _refuse(cli_message(e))
     except KeyboardInterrupt:
         _stderr(_interrupted(args))
         return EXIT_INTERRUPTED
@@ -80,6 +123,27 @@ def _refuse(message: str) -> int:
     return EXIT_INPUT
 
 
+def cli_message(e: TrainError) -> str:
+    """A library refusal in the command line's words: an ``ArgumentError`` as
+    ``command line: --flag = VALUE: RULE``, and in any message the backticked argument
+    names of :data:`ARGUMENT_FLAGS` as their flags."""
+    if isinstance(e, ArgumentError):
+        flag = ARGUMENT_FLAGS.get(e.argument, e.argument)
+        return field_message("command line", flag, e.value, flag_words(e.rule))
+    return flag_words(str(e))
+
+
+def flag_words(text: str) -> str:
+    """``text`` with each backticked Python argument name of :data:`ARGUMENT_FLAGS` (e.g.
+    ``` `from_hz` ```) replaced by its flag (``--from``)."""
+    return re.sub(r"`(\w+)`", lambda m: ARGUMENT_FLAGS.get(m[1], m[0]), text)
+
+
+def _command_line(argv: list[str] | None) -> str:
+    """How this run was asked for, as the results files record it."""
+    return " ".join(sys.argv if argv is None else ["gearjax", *argv])
+
+
 def _warning_printer(notes: list[str], fallback):
     """A ``warnings.showwarning`` that prints each distinct :class:`TrainWarning` (and
     any other warning of gearjax's own, e.g. a truncation estimate) once, as one line
@@ -89,7 +153,7 @@ def _warning_printer(notes: list[str], fallback):
         ours = issubclass(category, TrainWarning) or category.__module__.startswith("gearjax")
         if not ours:
             return fallback(message, category, filename, lineno, file, line)
-        text = _one_line(message, 1000)
+        text = flag_words(_one_line(message, 1000))
         if text not in notes:
             notes.append(text)
             _stderr(f"warning: {text}")
@@ -119,7 +183,7 @@ def _os_error(e: OSError) -> str:
 
 
 def _interrupted(args) -> str:
-    from ._journal import journal_path
+    from ._io.journal import journal_path
 
     out = getattr(args, "out", None)
     if getattr(args, "command", None) == "sweep" and out and journal_path(out).exists():
@@ -243,8 +307,8 @@ def _figure_formats() -> list[str]:
 
 
 def _atomic(path):
-    """Write ``path`` atomically (:func:`gearjax._results.atomic_path`)."""
-    from ._results import atomic_path
+    """Write ``path`` atomically (:func:`gearjax._io.results.atomic_path`)."""
+    from ._io.results import atomic_path
 
     return atomic_path(path)
 
@@ -396,9 +460,9 @@ def _point_flags(c: argparse.ArgumentParser) -> None:
 
 
 def _info(args, train, notes) -> int:
-    from ._kinematics import kinematics
-    from ._mesh import phasing_report
-    from ._static import static_loads
+    from ._gear.kinematics import kinematics
+    from ._gear.phasing import phasing_report
+    from ._gear.static_loads import static_loads
 
     if not (args.input_rpm > 0 and math.isfinite(args.input_rpm)):
         raise fail("command line", "--input-rpm", args.input_rpm, "must be a positive speed in rpm")
@@ -480,8 +544,13 @@ def _info(args, train, notes) -> int:
 def _harmonics_info(train, gear: str, kin) -> dict | None:
     """What the harmonic balance of ``gear`` needs: the excitation floor of K and the
     response cutoff of its first choice (``None`` where no mesh turns)."""
-    from ._assembly import assemble
-    from ._harmonics import CUTOFF_MARGIN, excitation_floor, floor_reason, response_cutoff_hz
+    from ._gear.assembly import assemble
+    from ._studies.harmonics import (
+        CUTOFF_MARGIN,
+        excitation_floor,
+        floor_reason,
+        response_cutoff_hz,
+    )
 
     if kin.mu is None:
         return None
@@ -495,8 +564,8 @@ def _harmonics_info(train, gear: str, kin) -> dict | None:
 
 
 def _modes(args, train, notes) -> int:
-    from ._assembly import assemble
-    from ._modal import REPEATED_RTOL, modes
+    from ._gear.assembly import assemble
+    from ._engine.modal import REPEATED_RTOL, modes
 
     g = train.gear(args.gear)
     result = modes(assemble(train, g.name))
@@ -513,7 +582,7 @@ def _modes(args, train, notes) -> int:
         "warnings": notes,
     }
     if args.plot:
-        from ._plot import plot_mode_shapes
+        from ._plot.save import plot_mode_shapes
 
         with _atomic(args.plot) as fig:
             plot_mode_shapes(result, fig, title=f"{train.name}: gear {g.name}, elastic modes")
@@ -536,8 +605,8 @@ def _modes(args, train, notes) -> int:
 
 
 def _calibrate(args, train, notes) -> int:
-    from ._calibrate import calibrate
-    from ._toml_io import save_train
+    from ._gear.calibrate import calibrate
+    from ._gear.toml_io import save_train
 
     g = train.gear(args.gear)
     result = calibrate(train, args.targets_hz, args.free, g.name)
@@ -584,7 +653,7 @@ def _calibrate(args, train, notes) -> int:
 
 
 def _sweep_cmd(args, train, notes) -> int:
-    from ._journal import journal_path, lock
+    from ._io.journal import journal_path, lock
 
     journal = journal_path(args.out) if args.out else None
     held = lock(journal) if journal else None  # refused while another run writes it
@@ -596,8 +665,8 @@ def _sweep_cmd(args, train, notes) -> int:
 
 
 def _sweep_run(args, train, notes, journal) -> int:
-    from ._results import save_results
-    from ._sweep import progress_printer, summary_json, sweep
+    from ._io.results import save_results
+    from ._studies.sweep import progress_printer, summary_json, sweep
 
     if args.resume and journal.exists():
         _stderr(f"sweep: resuming from {journal}")
@@ -606,13 +675,14 @@ def _sweep_run(args, train, notes, journal) -> int:
                    linear=args.linear, harmonics=args.harmonics, eta=args.eta,
                    max_step_hz=args.max_step, points=args.points,
                    max_points=args.max_points, smoothing=args.smoothing,
-                   progress=progress_printer(sys.stderr), journal=journal, resume=args.resume)
+                   progress=progress_printer(sys.stderr), journal=journal, resume=args.resume,
+                   command=args.command_line)
     ds = result.dataset
     if args.out:
         save_results(ds, args.out)
         journal.unlink(missing_ok=True)  # consolidated into the results file
     if args.plot:
-        from ._plot import plot_sweep
+        from ._plot.save import plot_sweep
 
         kind = "linear" if args.linear else "backlash"
         with _atomic(args.plot) as fig:
@@ -660,17 +730,17 @@ def _stderr(message: str) -> None:
 
 
 def _simulate_cmd(args, train, notes) -> int:
-    from ._results import points_json, save_results
-    from ._simulate import simulate_gear
+    from ._io.results import points_json, save_results
+    from ._studies.simulate import simulate_gear
 
     g = train.gear(args.gear)
     ds = simulate_gear(train, g.name, args.at, from_hz=args.from_hz, to_hz=args.to_hz,
                        points=args.points, stage=args.stage, linear=args.linear,
-                       progress=_stderr)
+                       progress=_stderr, command=args.command_line)
     if args.out:
         save_results(ds, args.out)
     if args.plot:
-        from ._plot import plot_points
+        from ._plot.save import plot_points
 
         kind = "linear" if args.linear else "backlash"
         with _atomic(args.plot) as fig:
@@ -708,12 +778,13 @@ def _simulate_cmd(args, train, notes) -> int:
 
 
 def _verify_cmd(args, train, notes) -> int:
-    from ._verify import save_verify, verify_gear, verify_json
+    from ._io.verify_file import save_verify
+    from ._studies.verify import verify_gear, verify_json
 
     g = train.gear(args.gear)
     curve = None
     if args.curve:
-        from ._results import load_results
+        from ._io.results import load_results
 
         try:
             curve = load_results(args.curve)
@@ -722,9 +793,10 @@ def _verify_cmd(args, train, notes) -> int:
     result = verify_gear(train, g.name, args.at, from_hz=args.from_hz, to_hz=args.to_hz,
                          points=args.points, stage=args.stage, linear=args.linear,
                          harmonics=args.harmonics, tol_linear=args.tol_linear,
-                         tol_nonlinear=args.tol_nonlinear, progress=_stderr)
+                         tol_nonlinear=args.tol_nonlinear, progress=_stderr,
+                         command=args.command_line)
     if args.plot:
-        from ._plot import plot_verify
+        from ._plot.save import plot_verify
 
         kind = "linear" if args.linear else "backlash"
         with _atomic(args.plot) as fig:
@@ -771,7 +843,7 @@ def _verify_cmd(args, train, notes) -> int:
 
 
 def _plot_cmd(args, train, notes) -> int:
-    from ._plot import plot_results
+    from ._plot.save import plot_results
 
     results = pathlib.Path(args.results)
     fig = pathlib.Path(args.out) if args.out else results.with_suffix(".png")
@@ -788,7 +860,7 @@ def _plot_cmd(args, train, notes) -> int:
 
 
 def _sensitivity_cmd(args, train, notes) -> int:
-    from ._sensitivity import sensitivity, sensitivity_json
+    from ._studies.sensitivity import sensitivity, sensitivity_json
 
     if not (args.at > 0 and math.isfinite(args.at)):
         raise fail("command line", "--at", args.at, "must be a positive mesh frequency in Hz")
@@ -821,9 +893,9 @@ def _sensitivity_cmd(args, train, notes) -> int:
 
 
 def _optimize_cmd(args, train, notes) -> int:
-    from ._optimize import OptimizeSettings, optimize, optimize_dataset, optimize_json
-    from ._results import save_results
-    from ._toml_io import save_train
+    from ._studies.optimize import OptimizeSettings, optimize, optimize_dataset, optimize_json
+    from ._io.results import save_results
+    from ._gear.toml_io import save_train
 
     settings = OptimizeSettings(
         proxy_points=args.proxy_points, phase_grid=args.phase_grid, screen=args.screen,
@@ -839,7 +911,7 @@ def _optimize_cmd(args, train, notes) -> int:
         with _atomic(args.out_train) as tmp:
             save_train(result.train, tmp)
     if args.out:
-        save_results(optimize_dataset(result, {"command": " ".join(sys.argv)}), args.out)
+        save_results(optimize_dataset(result, {"command": args.command_line}), args.out)
     out = optimize_json(result)
     out.update(out_train=args.out_train, out=args.out, warnings=notes)
     code = EXIT_OK if result.converged else EXIT_NOT_CONVERGED

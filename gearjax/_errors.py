@@ -43,6 +43,24 @@ def fail(source: str | None, field: str, value, rule: str) -> TrainError:
     return TrainError(field_message(source, field, value, rule))
 
 
+class ArgumentError(TrainError):
+    """A function argument outside its rule, in Python terms: the message is one line
+    ``argument NAME = VALUE: RULE``; ``argument``, ``value`` and ``rule`` are kept, and
+    other arguments a rule mentions are written as ``` `name` ``` so that a front end
+    (the CLI) can say the same thing in its own words."""
+
+    def __init__(self, argument: str, value, rule: str):
+        super().__init__(one_line(f"argument {argument} = {_show(value)}: {rule}"))
+        self.argument = argument
+        self.value = value
+        self.rule = rule
+
+
+def bad_argument(argument: str, value, rule: str) -> ArgumentError:
+    """An :class:`ArgumentError` to raise: ``argument`` is the Python parameter name."""
+    return ArgumentError(argument, value, rule)
+
+
 def warn_geometry(message: str) -> None:
     warnings.warn(message, GeometryWarning, stacklevel=3)
 

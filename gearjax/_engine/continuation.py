@@ -1,0 +1,468 @@
+"""Pseudo-arclength continuation of harmonic-balance solutions in a scalar parameter.
+
+The branch ``G(y, lambda) = 0`` (scaled HB residual, scaled unknowns ``y``) is
+followed in arclength ``s`` of ``z = (y, lambda)``: tangent predictor
+``z + h t``, bordered quasi-Newton (Broyden) corrector on
+``[G(z); t . (z - z_pred)] = 0``, new tangent from the bordered system (its last row
+keeps the orientation), adaptive step, folds where ``d lambda / ds`` changes sign,
+located by Hermite interpolation of ``lambda(s)`` between the two points. The
+parameter is the frequency (``FrequencyParameter``, ``lambda = Omega / Omega_ref``)
+or any scalar that scales a field of the ``System`` (``SystemParameter``: torque,
+backlash, damping, ...).
+
+One step is one jittable function (``arclength_step``), driven either from Python
+(``continue_branch``: progress, journaling, resumable) or entirely compiled in a
+``lax.while_loop`` (``continue_compiled``: small systems, where per-call overhead
+would dominate).
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array
+
+from . import bordered as _bordered
+from . import corrector as _corrector
+from . import hb as _hb
+
+STOP_REASONS = ("reached_end", "max_points", "step_too_small", "nonfinite", "closed_loop")
+REACHED_END, MAX_POINTS, STEP_TOO_SMALL, STOP_NONFINITE = range(4)
+
+
+class AbstractParameter(eqx.Module):
+    """A residual ``G(y, lambda)`` of scaled HB unknowns and one scalar parameter."""
+
+    problem: eqx.AbstractVar[_hb.HBProblem]
+
+    @abc.abstractmethod
+    def split(self, lam) -> tuple[_hb.HBProblem, Array]:
+        """The problem and base frequency (rad/s) at parameter value ``lam``."""
+
+    def residual(self, y, lam):
+        problem, omega = self.split(lam)
+        return _hb.residual(problem, y, omega)
+
+    def jacobian(self, y, lam):
+        problem, omega = self.split(lam)
+        return _hb.jacobian(problem, y, omega)
+
+    def d_lambda(self, y, lam):
+        return jax.jvp(lambda l: self.residual(y, l), (lam,), (jnp.ones_like(lam),))[1]
+
+    def factor(self, y, lam, ty, tlam, single: bool = False) -> _bordered.Factors:
+        """Factors of the bordered Jacobian ``[[dG/dy, dG/dlambda], [ty^T, tlam]]``:
+        condensed to the motions that deflect a mesh where some deflect none
+        (``problem.mesh_null``; ``_bordered.factor``, from the harmonic-balance
+        Jacobian), else dense from :meth:`jacobian`. A subclass that replaces the
+        residual of such a problem replaces this too."""
+        problem, omega = self.split(lam)
+        g = self.d_lambda(y, lam)
+        if problem.mesh_null is None:
+            return _bordered.dense(self.jacobian(y, lam), g, ty, tlam, single)
+        return _bordered.factor(problem, y, omega, g, ty, tlam, single)
+
+    def omega(self, lam):
+        return self.split(lam)[1]
+
+
+class FrequencyParameter(AbstractParameter):
+    """``lambda = Omega / omega_ref``: a frequency sweep."""
+
+    problem: _hb.HBProblem
+    omega_ref: Array
+
+    def split(self, lam):
+        return self.problem, lam * self.omega_ref
+
+
+class SystemParameter(AbstractParameter):
+    """``lambda`` scales one ``System`` field at fixed frequency: ``field = lambda * base``.
+
+    ``where`` selects the field (e.g. ``lambda s: s.backlash``); ``lambda`` from 0 to 1
+    is the homotopy from a linear start to the full backlash.
+    """
+
+    problem: _hb.HBProblem
+    omega_value: Array
+    where: Callable = eqx.field(static=True)
+
+    def split(self, lam):
+        base = self.where(self.problem.system)
+        system = eqx.tree_at(self.where, self.problem.system, lam * base)
+        return eqx.tree_at(lambda p: p.system, self.problem, system), self.omega_value
+
+
+class Settings(eqx.Module):
+    """Continuation settings (static).
+
+    ``step``: first arclength step (scaled units: unknowns in characteristic
+    lengths, lambda relative); ``min_step``, ``max_step``: bounds of the adaptive
+    step; ``max_dlambda``: largest parameter change per step; ``max_corrector``:
+    corrector iterations per point; ``fast``/``slow``: iteration counts that grow or
+    shrink the step; ``rtol``: corrector tolerance; ``fold_step``: a fold is only
+    accepted across a step this short (longer ones are retried shorter), which sets
+    the accuracy of the located fold; ``single``: the dense LU of the bordered Jacobian
+    (the corrector's start, the tangent) in single precision, residual, iterates and
+    tangent in double (the quasi-Newton corrector converges to the same ``rtol``; the
+    tangent is refined, :func:`_tangent`); the full-Newton fallback factorises in double.
+    """
+
+    step: float = eqx.field(static=True, default=0.02)
+    min_step: float = eqx.field(static=True, default=1e-7)
+    max_step: float = eqx.field(static=True, default=0.2)
+    max_dlambda: float = eqx.field(static=True, default=0.02)
+    max_corrector: int = eqx.field(static=True, default=15)
+    fast: int = eqx.field(static=True, default=5)
+    slow: int = eqx.field(static=True, default=10)
+    rtol: float = eqx.field(static=True, default=1e-9)
+    fold_step: float = eqx.field(static=True, default=1e-3)
+    single: bool = eqx.field(static=True, default=False)
+
+
+class ArcState(eqx.Module):
+    """Continuation state after a step attempt.
+
+    ``y``, ``lam``: last accepted point; ``ty``, ``tlam``: unit tangent there
+    (``tlam`` = d lambda / ds); ``h``: next step; ``accepted``: the attempt
+    succeeded; ``fold``: the accepted step crossed a fold (``tlam`` changed sign);
+    ``fold_lam``: its located parameter value; ``steps``: corrector iterations;
+    ``factors``: of the bordered Jacobian at the current point (``_bordered.Factors``),
+    reused by the next corrector (Broyden from them: one factorisation per point).
+    """
+
+    y: Array
+    lam: Array
+    ty: Array
+    tlam: Array
+    h: Array
+    accepted: Array
+    fold: Array
+    fold_lam: Array
+    steps: Array
+    factors: _bordered.Factors
+
+
+def _tangent(param: AbstractParameter, y, lam, ty, tlam, single: bool):
+    """Factors of the bordered Jacobian at ``(y, lam)`` (last row the previous tangent
+    ``(ty, tlam)``) and the solution ``t`` ``(N + 1,)`` of ``[[J, g], [ty^T, tlam]] t =
+    e_last`` (the tangent, not normalised, oriented along the previous one):
+    ``(t, factors, ok)``.
+
+    With ``single`` (:class:`Settings`) the dense LU is in single precision and ``t`` is
+    refined in double with the exact bordered product (a Jacobian-vector product of the
+    residual) until the last correction is below :data:`SINGLE_TOL` of ``t``, at most
+    :data:`SINGLE_REFINE` times; ``ok`` says whether it got there (always true in double).
+    """
+    e = jnp.zeros(y.shape[0] + 1).at[-1].set(1.0)
+    factors = param.factor(y, lam, ty, tlam, single)
+    t = _bordered.solve(factors, e)
+    if not single:
+        return t, factors, jnp.asarray(True)
+
+    def refine(c):
+        t, _, i = c
+        Jt = jax.jvp(param.residual, (y, lam), (t[:-1], t[-1]))[1]
+        d = _bordered.solve(factors, e - jnp.concatenate([Jt, (ty @ t[:-1] + tlam * t[-1])[None]]))
+        return t + d, jnp.linalg.norm(d) / jnp.linalg.norm(t), i + 1
+
+    t, change, _ = jax.lax.while_loop(lambda c: (c[1] > SINGLE_TOL) & (c[2] < SINGLE_REFINE),
+                                      refine, (t, jnp.asarray(jnp.inf), jnp.asarray(0)))
+    return t, factors, change <= SINGLE_TOL
+
+
+SINGLE_REFINE = 4
+"""Most refinement steps of a tangent from single-precision factors (:func:`_tangent`)."""
+
+SINGLE_TOL = 1e-4
+"""Refinement of such a tangent stops after a correction below this fraction of it (the
+error left is about that correction times the refinement's contraction ratio)."""
+
+
+def tangent_factors(param: AbstractParameter, y, lam, ty, tlam, single: bool = False,
+                    fallback=None):
+    """Factorise the bordered Jacobian at ``(y, lam)`` (last row the previous tangent) and
+    return the new unit tangent ``(ty, tlam)`` with the factors. With ``single`` the LU
+    is in single precision and the tangent refined (:func:`_tangent`); where that does
+    not converge, ``fallback`` ``(N + 1,)`` stands in for it (the chord from the last
+    point, a tangent from double factors)."""
+    if single and fallback is None:
+        raise ValueError("tangent_factors with single=True needs a fallback tangent")
+    t, factors, ok = _tangent(param, y, lam, ty, tlam, single)
+    if single:
+        t = jnp.where(ok, t, fallback)
+    t = t / jnp.linalg.norm(t)
+    return t[:-1], t[-1], factors
+
+
+def tangent(param: AbstractParameter, y, lam, ty, tlam):
+    """Unit tangent at ``(y, lam)`` oriented along the previous tangent ``(ty, tlam)``."""
+    return tangent_factors(param, y, lam, ty, tlam)[:2]
+
+
+def start(param: AbstractParameter, y, lam, direction, settings: Settings) -> ArcState:
+    """State at a converged point, tangent pointing to increasing ``lam`` if ``direction > 0``."""
+    lam = jnp.asarray(lam, float)
+    ty, tlam = tangent(param, y, lam, jnp.zeros_like(y), jnp.sign(direction) * 1.0)
+    ty, tlam, factors = tangent_factors(param, y, lam, ty, tlam, settings.single,
+                                        fallback=jnp.append(ty, tlam))
+    return ArcState(y=y, lam=lam, ty=ty, tlam=tlam,
+                    h=jnp.asarray(settings.step, float), accepted=jnp.asarray(True),
+                    fold=jnp.asarray(False), fold_lam=jnp.asarray(jnp.nan, float),
+                    steps=jnp.asarray(0), factors=factors)
+
+
+def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings) -> ArcState:
+    """One predictor-corrector attempt from ``state`` (jittable).
+
+    The corrector (:func:`gearjax._engine.corrector.correct`) is Broyden's method started
+    from the bordered Jacobian factorised at the current point, with a full-Newton
+    restart when it stops contracting; the new point's Jacobian is factorised once, for
+    its tangent and for the next corrector. On success the state moves to the new point
+    with a grown or kept step; on failure it stays and the step halves (the caller stops
+    below ``min_step``).
+
+    The returned ``factors`` are those of the new point whenever the corrector
+    converged, also for an attempt that is not accepted (a fold crossed with a long
+    step): :func:`keep_factors` puts the state's back there (a select over the factors is
+    itself a pass over the matrix, which the Python driver does without).
+    """
+    h = jnp.minimum(state.h, settings.max_dlambda / jnp.maximum(jnp.abs(state.tlam), 1e-12))
+    y_p = state.y + h * state.ty
+    lam_p = state.lam + h * state.tlam
+
+    y, lam, k, converged = _corrector.correct(param, state.factors, state.ty, state.tlam,
+                                             y_p, lam_p, settings.rtol,
+                                             settings.max_corrector)
+
+    def new_tangent(_):
+        # where the tangent from single-precision factors does not converge (a nearly
+        # singular Jacobian), the chord from the last point stands in for it
+        chord = jnp.concatenate([y - state.y, (lam - state.lam)[None]])
+        return tangent_factors(param, y, lam, state.ty, state.tlam, settings.single, chord)
+
+    def old_tangent(_):
+        return state.ty, state.tlam, state.factors
+
+    ty, tlam, factors = jax.lax.cond(converged, new_tangent, old_tangent, None)
+    crossed = converged & (jnp.sign(tlam) != jnp.sign(state.tlam))
+    # a fold crossed with a long step is approached again with shorter ones, so that
+    # the interpolated fold location below is accurate
+    refine = crossed & (h > settings.fold_step)
+    accepted = converged & ~refine
+    fold = crossed & ~refine
+    # d lambda/ds taken linear in s between the two tangents (a, b) over the chord
+    # length h: zero at s* = h a / (a - b), where lambda = lam_old + a s* / 2
+    a, b = state.tlam, tlam
+    chord_length = jnp.sqrt(jnp.sum((y - state.y) ** 2) + (lam - state.lam) ** 2)
+    fold_lam = jnp.where(fold, state.lam + chord_length * a**2 / (2 * jnp.where(fold, a - b, 1.0)),
+                         jnp.nan)
+    grow = jnp.where(k <= settings.fast, 1.5, jnp.where(k >= settings.slow, 0.6, 1.0))
+    h_next = jnp.where(accepted, jnp.minimum(h * grow, settings.max_step),
+                       jnp.where(refine, jnp.maximum(h * 0.25, settings.fold_step), h * 0.5))
+    keep = lambda new, old: jnp.where(accepted, new, old)  # noqa: E731
+    return ArcState(
+        y=keep(y, state.y),
+        lam=keep(lam, state.lam),
+        ty=keep(ty, state.ty),
+        tlam=keep(tlam, state.tlam),
+        h=h_next,
+        accepted=accepted,
+        fold=fold,
+        fold_lam=fold_lam,
+        steps=k,
+        factors=factors,
+    )
+
+
+def keep_factors(old: ArcState, new: ArcState) -> ArcState:
+    """``new`` with ``old``'s factors where the attempt was not accepted (jittable)."""
+    return _replace(new, factors=jax.tree.map(lambda a, b: jnp.where(new.accepted, a, b),
+                                              new.factors, old.factors))
+
+
+def _replace(module, **fields):
+    """A copy of the equinox module ``module`` with ``fields`` replaced."""
+    names = tuple(fields)
+    return eqx.tree_at(lambda m: tuple(getattr(m, n) for n in names), module,
+                       tuple(fields[n] for n in names))
+
+
+class Branch(eqx.Module):
+    """Points of a continued branch (numpy arrays, in order along the branch).
+
+    ``y`` ``(P, N)``: scaled unknowns; ``lam`` ``(P,)``; ``omega`` ``(P,)`` base
+    frequency (rad/s); ``steps`` ``(P,)`` corrector iterations; ``fold`` ``(P,)``: a fold
+    lies between this point and the previous one; ``fold_lam`` ``(P,)`` its location
+    (NaN elsewhere); ``stop``: why continuation ended (``STOP_REASONS``).
+    """
+
+    y: np.ndarray
+    lam: np.ndarray
+    omega: np.ndarray
+    steps: np.ndarray
+    fold: np.ndarray
+    fold_lam: np.ndarray
+    tangent: np.ndarray
+    h: np.ndarray
+    stop: str = eqx.field(static=True)
+
+
+def distinct_folds(fold_lams, tol: float = 1e-3) -> np.ndarray:
+    """Fold locations with zig-zags merged: folds closer than ``tol`` form a cluster; an
+    odd cluster is one fold (at its median), an even one cancels (the discrete AFT of
+    a non-smooth force can make the tangent flip back and forth right at a fold)."""
+    lams = np.sort(np.asarray(fold_lams, float)[np.isfinite(fold_lams)])
+    out, group = [], []
+    for lam in lams:
+        if group and lam - group[-1] > tol:
+            if len(group) % 2:
+                out.append(float(np.median(group)))
+            group = []
+        group.append(lam)
+    if group and len(group) % 2:
+        out.append(float(np.median(group)))
+    return np.array(out)
+
+
+def continue_compiled(param: AbstractParameter, y0, lam0, lam_end, settings: Settings,
+                      max_points: int = 500):
+    """The whole continuation as one compiled ``lax.while_loop`` (fixed buffers).
+
+    **Returns:** ``(ys (max_points, N), lams, folds, fold_lams, n_points, stop_code)``;
+    rows past ``n_points`` are padding. Suited to small systems (the clearance
+    oscillator benchmark), where per-step Python overhead would dominate.
+    """
+    direction = jnp.sign(lam_end - lam0)
+    state = start(param, y0, lam0, direction, settings)
+    N = y0.shape[0]
+    ys = jnp.zeros((max_points, N)).at[0].set(y0)
+    lams = jnp.full((max_points,), jnp.nan).at[0].set(lam0)
+    folds = jnp.zeros((max_points,), bool)
+    fold_lams = jnp.full((max_points,), jnp.nan)
+
+    def cond(c):
+        st, _, _, _, _, n, code = c
+        return code < 0
+
+    def body(c):
+        st, ys, lams, folds, fold_lams, n, _ = c
+        new = keep_factors(st, arclength_step(param, st, settings))
+        ys = jnp.where(new.accepted, ys.at[n].set(new.y), ys)
+        lams = jnp.where(new.accepted, lams.at[n].set(new.lam), lams)
+        folds = jnp.where(new.accepted, folds.at[n].set(new.fold), folds)
+        fold_lams = jnp.where(new.accepted, fold_lams.at[n].set(new.fold_lam), fold_lams)
+        n = n + new.accepted.astype(n.dtype)
+        past = (new.lam - lam_end) * direction >= 0
+        code = jnp.where(
+            ~jnp.all(jnp.isfinite(new.y)), STOP_NONFINITE,
+            jnp.where(new.accepted & past, REACHED_END,
+                      jnp.where(n >= max_points, MAX_POINTS,
+                                jnp.where(new.h < settings.min_step, STEP_TOO_SMALL, -1))))
+        return new, ys, lams, folds, fold_lams, n, code
+
+    init = (state, ys, lams, folds, fold_lams, jnp.asarray(1), jnp.asarray(-1))
+    _, ys, lams, folds, fold_lams, n, code = jax.lax.while_loop(cond, body, init)
+    return ys, lams, folds, fold_lams, n, code
+
+
+def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Settings,
+                    max_points: int = 2000, on_point: Callable | None = None,
+                    state: ArcState | None = None) -> Branch:
+    """Continuation driven from Python: one jitted step per call, ``on_point(i, state)``
+    after each accepted point (progress, journaling; a string it returns stops the
+    branch there with that reason). Keeps every point reached when it has to stop, with
+    the reason. ``state`` resumes from a saved state.
+
+    Stops with ``closed_loop`` when the branch comes back onto a stretch it has already
+    traced, in the same direction (:func:`revisits`): with exact backlash the sampled
+    residual is only piecewise smooth, and at a non-smooth junction of solution curves
+    the continuation can enter a loop that it would otherwise circle until
+    ``max_points``.
+    """
+    step = _arclength_step_jit
+    direction = float(np.sign(lam_end - lam0))
+    if state is None:
+        state = _start_jit(param, y0, lam0, direction, settings)
+    rows = [(np.asarray(state.y), float(state.lam), 0, False, np.nan,
+             np.concatenate([np.asarray(state.ty), [float(state.tlam)]]), float(state.h))]
+    trace = Trace(max_points, rows[0][0].size + 1)
+    trace.add(np.append(rows[0][0], rows[0][1]), rows[0][5])
+    if on_point is not None:
+        on_point(0, state)
+    stop = "max_points"
+    while len(rows) < max_points:
+        new = step(param, state, settings)
+        # a rejected attempt keeps the factors of the point it started from
+        state = new if bool(new.accepted) else _replace(new, factors=state.factors)
+        if not bool(jnp.all(jnp.isfinite(state.y))):
+            stop = "nonfinite"
+            break
+        if bool(state.accepted):
+            rows.append((np.asarray(state.y), float(state.lam), int(state.steps),
+                         bool(state.fold), float(state.fold_lam),
+                         np.concatenate([np.asarray(state.ty), [float(state.tlam)]]),
+                         float(state.h)))
+            asked = on_point(len(rows) - 1, state) if on_point is not None else None
+            if (float(state.lam) - lam_end) * direction >= 0:
+                stop = "reached_end"
+                break
+            if asked:
+                stop = asked
+                break
+            z = np.append(rows[-1][0], rows[-1][1])
+            if trace.revisits(z, rows[-1][5]):
+                stop = "closed_loop"
+                break
+            trace.add(z, rows[-1][5])
+        elif float(state.h) < settings.min_step:
+            stop = "step_too_small"
+            break
+    y, lam, steps, fold, fold_lam, tan, h = (np.array(v) for v in zip(*rows))
+    omegas = np.array([float(param.omega(l)) for l in lam])
+    return Branch(y=np.stack(y), lam=lam, omega=omegas, steps=steps, fold=fold,
+                  fold_lam=fold_lam, tangent=np.stack(tan), h=h, stop=stop)
+
+
+class Trace:
+    """Accepted points ``z = (y, lambda)`` of a branch with their unit tangents and
+    arclength, for :meth:`revisits` (preallocated; ``capacity`` points of size ``size``)."""
+
+    def __init__(self, capacity: int, size: int):
+        self.z = np.empty((capacity, size))
+        self.t = np.empty((capacity, size))
+        self.s = np.zeros(capacity)  # arclength (sum of chords) from the first point
+        self.gap = np.zeros(capacity)  # chord to the neighbouring points, the larger
+        self.n = 0
+
+    def add(self, z, t) -> None:
+        if self.n:
+            chord = float(np.linalg.norm(z - self.z[self.n - 1]))
+            self.gap[self.n - 1] = max(self.gap[self.n - 1], chord)
+            self.gap[self.n] = chord
+            self.s[self.n] = self.s[self.n - 1] + chord
+        self.z[self.n], self.t[self.n] = z, t
+        self.n += 1
+
+    def revisits(self, z, t) -> bool:
+        """``z`` lies on an earlier stretch of the branch: closer to an earlier point than
+        0.6 of the chords there, with the tangent pointing the same way (cosine > 0.99),
+        after a path at least 20 such chords long (a loop, not the neighbourhood of a
+        fold, where the branch turns back close to itself)."""
+        n = self.n
+        if n < 2:
+            return False
+        s_now = self.s[n - 1] + float(np.linalg.norm(z - self.z[n - 1]))
+        d = np.sqrt(np.sum((self.z[:n] - z) ** 2, axis=1))
+        near = (d < 0.6 * self.gap[:n]) & (s_now - self.s[:n] > 20 * self.gap[:n]) & (
+            self.t[:n] @ t > 0.99)
+        return bool(np.any(near))
+
+
+_arclength_step_jit = jax.jit(arclength_step, static_argnums=(2,))
+_start_jit = jax.jit(start, static_argnums=(4,))

@@ -1,0 +1,488 @@
+"""Time integration of a ``System`` to its steady state, with diffrax.
+
+The equations are exactly those of the harmonic balance (``_hb``):
+
+    M x'' + C x' + K x + W^T F(t) = f(t),   p = W x - e(t),
+    F = mesh_force(p, p', kappa(t), kbar, b, c)
+
+with the stiffness ``kappa`` the truncated Fourier series of the system
+(``fourier_series`` of ``k_cos``, ``k_sin``: the ``H`` stiffness harmonics, not a
+true rectangular wave), the transmission error ``e`` the series of ``te_cos``,
+``te_sin`` and the forcing ``f_mean`` plus the ``f_cos``, ``f_sin`` columns at
+``forcing_mu Omega``. The mesh force comes from the one shared ``mesh_force``.
+
+Integration variables are scaled: the phase ``tau = Omega t`` (one base period is
+``2 pi``) and ``y = x / x_scale`` with the harmonic balance's ``x_scale`` (the
+rotation that deflects a mesh by the characteristic length), so the state
+``(y, dy/dtau)`` is of order one and ``rtol``, ``atol`` mean fractions of the
+backlash (or static mesh deflection).
+
+Solver: the paper's braked members sit on 1e10 N m/rad housing springs, a
+~0.4 MHz mode with damping ratio ~4e-4, against mesh frequencies of a few kHz, and
+the response also holds the 39-45 kHz shaft modes (damping ratio ~0.005, excited
+through the parametric mesh stiffness) that ``rtol = 1e-8`` must resolve. The
+default is the explicit 8th-order ``diffrax.Dopri8`` (7th-order dense output for
+the samples) with an I step-size controller: it is 7-11 times faster than the L-stable
+``diffrax.Kvaerno5`` on the stiff brake springs at this tolerance, with the same forces
+(docs/time_domain.md has the measurements). Both are available
+(``TimeDomain(solver=diffrax.Kvaerno5(), pcoeff=0.3, icoeff=0.3)``) and tested against
+each other.
+
+Backlash makes the right-hand side piecewise linear in ``p`` (a kink; with
+``contact_damping`` a jump of the damping term). A step that straddles a contact
+switch has an embedded error estimate of low order, so the controller rejects it
+and shrinks the step onto the switch: the switch is resolved to the tolerance
+without event location (events would restart the solver at every one of the
+dozens of switches per period). Convergence is checked by halving the tolerances
+(tests).
+
+Steady state: integrate one base period ``2 pi / Omega`` at a time and compare
+the Poincare points (mesh deflections ``W x`` and rates ``W x'``, not the full
+state: the undamped near-rigid-body mode never settles but carries no mesh force)
+with those 1..8 periods earlier.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import diffrax as dfx
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+from .._config import require_x64
+from .mesh_force import fourier_series, mesh_force
+from .static import static_deflection
+from .system import System
+
+# result codes per trajectory (kept in every output)
+RESULTS = ("periodic", "not_periodic", "max_steps", "solver_failed", "nonfinite")
+PERIODIC, NOT_PERIODIC, MAX_STEPS, SOLVER_FAILED, NONFINITE = range(5)
+
+
+class TimeDomain(eqx.Module):
+    """Time-integration settings (static: they are compile keys).
+
+    **Fields:**
+
+    - ``solver``: a diffrax solver (default ``Dopri8()``, see the module docstring);
+    - ``rtol``, ``atol``: step-size controller tolerances on the scaled state (units
+      of the characteristic mesh length); ``pcoeff``, ``icoeff``: PI coefficients of
+      ``diffrax.PIDController`` (use 0.3, 0.3 with an implicit solver);
+    - ``max_steps``: diffrax steps allowed per base period (a point that needs
+      more ends with ``max_steps``);
+    - ``n_samples``: uniform samples per base period in the returned trajectory;
+    - ``sample_periods``: base periods sampled at the end (set it to a found
+      sub-harmonic period to get that orbit's responses);
+    - ``max_periods``: base periods integrated at most before ``not_periodic``;
+    - ``periodic_tol``: tolerance on the change of the Poincare point (mesh
+      deflections over the characteristic length, rates ``dp/dtau`` over the length
+      times the largest mesh multiplier) after one period; keep it well above the
+      integration noise (about ``100 rtol``: with ``rtol = 1e-6`` the paper's case
+      never settles to ``1e-6``);
+    - ``max_subharmonic``: longest period (in base periods) looked for. A period
+      ``q > 1`` counts when the Poincare point repeats after ``q`` periods at ``q``
+      checks in a row while it moves by more than ``100 periodic_tol`` over every
+      shorter period (so integration noise near the tolerance is not a sub-harmonic).
+    """
+
+    solver: dfx.AbstractSolver = dfx.Dopri8()
+    rtol: float = eqx.field(static=True, default=1e-8)
+    atol: float = eqx.field(static=True, default=1e-8)
+    pcoeff: float = eqx.field(static=True, default=0.0)
+    icoeff: float = eqx.field(static=True, default=1.0)
+    max_steps: int = eqx.field(static=True, default=50_000)
+    n_samples: int = eqx.field(static=True, default=512)
+    sample_periods: int = eqx.field(static=True, default=1)
+    max_periods: int = eqx.field(static=True, default=100)
+    periodic_tol: float = eqx.field(static=True, default=1e-6)
+    max_subharmonic: int = eqx.field(static=True, default=8)
+
+    def __check_init__(self):
+        for name in ("max_steps", "n_samples", "sample_periods", "max_periods",
+                     "max_subharmonic"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"TimeDomain.{name} must be a positive integer, not "
+                                 f"{getattr(self, name)!r}.")
+        for name in ("rtol", "atol", "periodic_tol"):
+            if not float(getattr(self, name)) > 0:
+                raise ValueError(f"TimeDomain.{name} must be positive, not "
+                                 f"{getattr(self, name)!r}.")
+
+
+class Trajectory(eqx.Module):
+    """The end of a time integration: the last ``sample_periods`` base periods.
+
+    Shapes are for one frequency; batched calls add leading axes. ``T`` =
+    ``n_samples * sample_periods``.
+
+    **Fields:**
+
+    - ``omega``: base frequency (rad/s);
+    - ``t`` ``(T,)``: sample times (s), uniform, from the start of the sampled periods;
+    - ``x``, ``v`` ``(n, T)``: coordinates (rad or m) and their rates (per s);
+    - ``p``, ``p_dot`` ``(m, T)``: mesh deflections ``W x - e`` (m) and rates (m/s);
+    - ``F`` ``(m, T)``: mesh forces (N), from ``mesh_force``;
+    - ``x_end``, ``v_end`` ``(n,)``: the state after the last period (at phase 0 of
+      the excitation), where a sweep continues;
+    - ``result``: code, see ``RESULTS``; ``periods``: base periods integrated;
+      ``period``: the period found in base periods (1 when periodic;
+      ``2..max_subharmonic`` a sub-harmonic; 0 none: quasi-periodic, chaotic or still transient);
+      ``distance`` ``(max_subharmonic,)``: change of the Poincare point over
+      ``1..max_subharmonic`` periods at the last check (scaled, see
+      ``TimeDomain.periodic_tol``); ``num_steps``, ``num_rejected``: accepted and
+      rejected solver steps in all.
+    """
+
+    omega: Float[Array, ""]
+    t: Float[Array, " T"]
+    x: Float[Array, "n T"]
+    v: Float[Array, "n T"]
+    p: Float[Array, "m T"]
+    p_dot: Float[Array, "m T"]
+    F: Float[Array, "m T"]
+    x_end: Float[Array, " n"]
+    v_end: Float[Array, " n"]
+    result: Int[Array, ""]
+    periods: Int[Array, ""]
+    period: Int[Array, ""]
+    distance: Float[Array, " Q"]
+    num_steps: Int[Array, ""]
+    num_rejected: Int[Array, ""]
+
+    @property
+    def periodic(self):
+        return self.result == PERIODIC
+
+
+# ------------------------------------------------------------------------ the model
+
+
+def _scales(system: System):
+    """Characteristic mesh length (m) and coordinate scale ``(n,)``: as the harmonic balance
+    (1 and ones, SI units, for a system without meshes)."""
+    if not system.n_meshes:
+        return jnp.asarray(1.0), jnp.ones(system.n_dof)
+    _, F_static = static_deflection(system)
+    p_static = jnp.abs(F_static / system.kbar)
+    length = jnp.max(jnp.concatenate([system.backlash, p_static, jnp.array([1e-12])]))
+    lever = jnp.max(jnp.abs(system.W), axis=0)
+    return length, length / jnp.where(lever > 0, lever, 1.0)
+
+
+def _excitation(system: System, tau):
+    """Stiffness ``kappa``, transmission error ``e`` (m) and ``de/dtau`` (m/rad), each
+    ``(m,)`` or ``(m, T)``, and the forcing ``f`` (``(n,)`` or ``(n, T)``) at phases ``tau``."""
+    mu = jnp.asarray(system.mesh_mu)
+    shape = (system.n_meshes,) + jnp.shape(tau)
+    if system.k_cos.shape[-1]:
+        kappa = 1.0 + fourier_series(system.k_cos, system.k_sin, mu, 1.0, tau)
+    else:
+        kappa = jnp.ones(shape)
+    He = system.te_cos.shape[-1]
+    if He:
+        order = jnp.arange(1, He + 1)[None, :] * mu[:, None]
+        te = fourier_series(system.te_cos, system.te_sin, mu, 1.0, tau)
+        te_rate = fourier_series(order * system.te_sin, -order * system.te_cos, mu, 1.0, tau)
+    else:
+        te = te_rate = jnp.zeros(shape)
+    f = system.f_mean if jnp.ndim(tau) == 0 else system.f_mean[:, None] * jnp.ones(jnp.shape(tau))
+    if system.forcing_mu:
+        arg = jnp.asarray(system.forcing_mu, dtype=float)[:, None] * jnp.atleast_1d(tau)
+        harm = system.f_cos @ jnp.cos(arg) + system.f_sin @ jnp.sin(arg)
+        f = f + (harm if jnp.ndim(tau) else harm[:, 0])
+    return kappa, te, te_rate, f
+
+
+class _Problem(eqx.Module):
+    """A ``System`` prepared for integration in ``tau = Omega t`` and ``y = x / x_scale``."""
+
+    system: System
+    Minv: Array  # (n, n)
+    K: Array  # (n, n)
+    x_scale: Array  # (n,)
+    length: Array  # ()
+    rate_scale: Array  # (): mesh rate scale, length * max multiplier
+
+
+def _problem(system: System) -> _Problem:
+    length, x_scale = _scales(system)
+    top = max(tuple(system.mesh_mu) + tuple(system.forcing_mu) + (1,))
+    return _Problem(system=system, Minv=jnp.linalg.inv(system.M), K=system.K, x_scale=x_scale,
+                    length=length, rate_scale=length * top)
+
+
+def _vector_field(tau, z, args):
+    problem, omega = args
+    s = problem.system
+    n = s.n_dof
+    y, u = z[:n], z[n:]
+    x = problem.x_scale * y
+    v = omega * problem.x_scale * u
+    kappa, te, te_rate, f = _excitation(s, tau)
+    p = s.W @ x - te
+    p_dot = s.W @ v - omega * te_rate
+    F = mesh_force(p, p_dot, kappa, s.kbar, s.backlash, s.damping, s.contact_damping)
+    acc = problem.Minv @ (f - s.C @ v - problem.K @ x - s.W.T @ F)
+    return jnp.concatenate([u, acc / (omega**2 * problem.x_scale)])
+
+
+# -------------------------------------------------------------------- initial states
+
+
+def contact_state(system: System):
+    """The static solution shifted into contact on each mesh's loaded flank.
+
+    Solves the mean-stiffness statics with ``g(p) = p - b sign(F_static)`` (as
+    ``_hb.linear_guess``): every mesh deflects by its static deflection plus its
+    backlash, never starting inside the gap. **Returns:** ``(x0, v0)``, ``(n,)``
+    each (rad or m, and zero rates).
+    """
+    _, F_static = static_deflection(system)
+    preload = system.W.T @ (system.kbar * system.backlash * jnp.sign(F_static))
+    x0, _ = static_deflection(dataclasses.replace(system, f_mean=system.f_mean + preload))
+    return x0, jnp.zeros_like(x0)
+
+
+def hb_initial_state(X: Float[Array, "C n"], omega, eta: int = 1):
+    """State at ``t = 0`` of a harmonic-balance solution.
+
+    **Arguments:** ``X`` ``(2K+1, n)``: coefficients of ``x(tau)``, ``tau = (Omega /
+    eta) t`` (``HBSolution.X``); ``omega``: base frequency Omega (rad/s); ``eta``: the
+    sub-harmonic index of the solution. **Returns:** ``(x0, v0)``, ``(n,)`` each
+    (rad or m, and rad/s or m/s).
+    """
+    X = jnp.asarray(X)
+    k = jnp.arange(1, (X.shape[0] - 1) // 2 + 1)[:, None]
+    x0 = X[0] + jnp.sum(X[1::2], axis=0)
+    v0 = (omega / eta) * jnp.sum(k * X[2::2], axis=0)
+    return x0, v0
+
+
+# ---------------------------------------------------------------------- steady state
+
+
+def _poincare(problem: _Problem, z):
+    """Scaled mesh deflections and rates (the full state for a system without meshes)."""
+    s, n = problem.system, problem.system.n_dof
+    if not s.n_meshes:
+        return z
+    p = s.W @ (problem.x_scale * z[:n]) / problem.length
+    r = s.W @ (problem.x_scale * z[n:]) / problem.rate_scale
+    return jnp.concatenate([p, r])
+
+
+def _steady_state(problem: _Problem, omega, x0, v0, settings: TimeDomain) -> Trajectory:
+    require_x64()
+    s = problem.system
+    n, N, P, Q = s.n_dof, settings.n_samples, settings.sample_periods, settings.max_subharmonic
+    omega = eqx.error_if(jnp.asarray(omega, dtype=float), ~(omega > 0),
+                         "simulate: the base frequency omega must be positive (rad/s)")
+    z0 = jnp.concatenate([x0 / problem.x_scale, v0 / (omega * problem.x_scale)])
+    term = dfx.ODETerm(_vector_field)
+    controller = dfx.PIDController(rtol=settings.rtol, atol=settings.atol,
+                                   pcoeff=settings.pcoeff, icoeff=settings.icoeff)
+    # the last sample exactly at the period's end (2 pi j / N rounds above 2 pi for some N)
+    frac = jnp.minimum(2 * jnp.pi * jnp.arange(N + 1) / N, 2 * jnp.pi)
+    q = jnp.arange(1, Q + 1)
+
+    def one_period(k, z):
+        # every excitation is 2 pi periodic in tau: each period runs over [0, 2 pi]
+        sol = dfx.diffeqsolve(term, settings.solver, 0.0, 2 * jnp.pi, None, z,
+                              args=(problem, omega), saveat=dfx.SaveAt(ts=frac),
+                              stepsize_controller=controller, max_steps=settings.max_steps,
+                              adjoint=dfx.ForwardMode(), throw=False)
+        return sol
+
+    def cond(state):
+        return ~state["done"]
+
+    def body(state):
+        k, z = state["k"], state["z"]
+        sol = one_period(k, z)
+        ok = sol.result == dfx.RESULTS.successful
+        z_new = sol.ys[N]
+        finite = jnp.all(jnp.isfinite(sol.ys))
+        good = ok & finite
+        point = _poincare(problem, z_new)
+        d = jnp.max(jnp.abs(point[None, :] - state["buffer"]), axis=1)  # (Q,)
+        d = jnp.where(q <= k + 1, d, jnp.inf)
+        streak = jnp.where(d < settings.periodic_tol, state["streak"] + 1, 0)
+        # a sub-harmonic must also move clearly over every shorter period
+        shorter = jnp.tril(jnp.ones((Q, Q), dtype=bool), k=-1)  # shorter[i, j]: j < i
+        apart = jnp.all(~shorter | (d[None, :] > 100 * settings.periodic_tol), axis=1)
+        found = (streak >= q) & ((q == 1) | apart)
+        period = jnp.where(jnp.any(found), jnp.argmax(found) + 1, 0)
+        k_new = k + 1
+        code = jnp.where(~ok, jnp.where(sol.result == dfx.RESULTS.max_steps_reached,
+                                        MAX_STEPS, SOLVER_FAILED),
+                         jnp.where(~finite, NONFINITE,
+                                   jnp.where(period == 1, PERIODIC, NOT_PERIODIC)))
+        done = ~good | (((period > 0) & (k_new >= P)) | (k_new >= max(settings.max_periods, P)))
+        samples = jnp.concatenate([state["samples"][N:], sol.ys[:N]], axis=0)
+        last = jnp.where((d < settings.periodic_tol) & apart, q, Q + 1)
+        return dict(
+            k=jnp.where(good, k_new, k),
+            z=jnp.where(good, z_new, z),
+            buffer=jnp.where(good, jnp.concatenate([point[None], state["buffer"][:-1]]),
+                             state["buffer"]),
+            streak=streak,
+            samples=jnp.where(good, samples, state["samples"]),
+            done=done,
+            code=code,
+            period=jnp.where(period > 0, period,
+                             jnp.where(jnp.min(last) <= Q, jnp.min(last), 0)),
+            distance=d,
+            steps=state["steps"] + sol.stats["num_accepted_steps"],
+            rejected=state["rejected"] + sol.stats["num_rejected_steps"],
+        )
+
+    init = dict(
+        k=jnp.asarray(0),
+        z=z0,
+        buffer=jnp.broadcast_to(_poincare(problem, z0), (Q,) + _poincare(problem, z0).shape),
+        streak=jnp.zeros(Q, dtype=int),
+        samples=jnp.zeros((P * N, 2 * n)),
+        done=jnp.asarray(False),
+        code=jnp.asarray(NOT_PERIODIC),
+        period=jnp.asarray(0),
+        distance=jnp.full(Q, jnp.inf),
+        steps=jnp.asarray(0),
+        rejected=jnp.asarray(0),
+    )
+    # at least ``sample_periods`` periods, so that every sample is filled
+    state = jax.lax.while_loop(cond, body, init)
+    k = state["k"]
+    tau = 2 * jnp.pi * (k - P) + 2 * jnp.pi * jnp.arange(P * N) / N
+    z = state["samples"].T  # (2n, T)
+    x = problem.x_scale[:, None] * z[:n]
+    v = omega * problem.x_scale[:, None] * z[n:]
+    kappa, te, te_rate, _ = _excitation(s, tau)
+    p = s.W @ x - te
+    p_dot = s.W @ v - omega * te_rate
+    F = mesh_force(p, p_dot, kappa, s.kbar[:, None], s.backlash[:, None], s.damping[:, None],
+                   s.contact_damping)
+    z_end = state["z"]
+    return Trajectory(omega=omega, t=tau / omega, x=x, v=v, p=p, p_dot=p_dot, F=F,
+                      x_end=problem.x_scale * z_end[:n],
+                      v_end=omega * problem.x_scale * z_end[n:],
+                      result=state["code"], periods=k, period=state["period"],
+                      distance=state["distance"], num_steps=state["steps"],
+                      num_rejected=state["rejected"])
+
+
+# ------------------------------------------------------------------------ public API
+
+
+def _start(system: System, x0, v0):
+    if x0 is None:
+        x0, zero = contact_state(system)
+        return x0, zero if v0 is None else jnp.asarray(v0, dtype=float)
+    x0 = jnp.asarray(x0, dtype=float)
+    return x0, jnp.zeros_like(x0) if v0 is None else jnp.asarray(v0, dtype=float)
+
+
+def simulate(system: System, omega, *, x0=None, v0=None,
+             settings: TimeDomain = TimeDomain()) -> Trajectory:
+    """Integrate ``system`` at base frequency ``omega`` until its steady state.
+
+    Starts at ``t = 0`` from ``(x0, v0)`` (e.g. :func:`hb_initial_state` of a
+    harmonic-balance solution) or, when ``x0`` is None, from the static solution in
+    contact (:func:`contact_state`), then integrates whole base periods
+    ``2 pi / omega`` until the mesh deflections and rates repeat after one period
+    (``periodic``), repeat after ``2..max_subharmonic`` periods over a whole cycle
+    (``not_periodic`` with ``period`` set), or ``max_periods`` pass (``not_periodic``,
+    ``period`` the shortest near-repetition at the last check or 0). Solver failure is
+    a result code, never an exception. jit-compiled; vmap it or use
+    :func:`simulate_points` and :func:`simulate_sweep` for many frequencies.
+
+    **Arguments:** ``system``: the :class:`System`; ``omega``: base frequency Omega
+    (rad/s, scalar); ``x0``, ``v0``: ``(n,)`` initial coordinates (rad or m) and
+    rates (per s); ``settings``: :class:`TimeDomain`. **Returns:** a :class:`Trajectory`.
+    """
+    return _simulate(system, *_arrays(omega, x0, v0), settings)
+
+
+def _arrays(*values):
+    """Python numbers would be static under ``filter_jit`` (one compilation per value)."""
+    return tuple(None if v is None else jnp.asarray(v, dtype=float) for v in values)
+
+
+@eqx.filter_jit
+def _simulate(system, omega, x0, v0, settings):
+    x0, v0 = _start(system, x0, v0)
+    return _steady_state(_problem(system), omega, x0, v0, settings)
+
+
+def simulate_points(system: System, omegas, *, x0=None, v0=None,
+                    settings: TimeDomain = TimeDomain(), batch_size: int | None = None
+                    ) -> Trajectory:
+    """Independent steady states at every frequency of ``omegas`` in one jitted call.
+
+    **Arguments:** ``omegas`` ``(B,)`` (rad/s); ``x0``, ``v0``: ``(n,)`` shared or
+    ``(B, n)`` per point (e.g. :func:`hb_initial_state` vmapped over harmonic-balance
+    solutions), None for the static contact state; ``batch_size``: None vmaps all
+    ``B`` points (for accelerators); an integer runs ``jax.lax.map`` over chunks of
+    that many vmapped points. A vmapped batch advances in lock-step (every point takes
+    as many steps and periods as the slowest), which on a CPU usually costs more than it
+    saves (docs/time_domain.md). **Returns:** a :class:`Trajectory` with a leading axis ``B``
+    on every field.
+    """
+    return _simulate_points(system, *_arrays(omegas, x0, v0), settings, batch_size)
+
+
+@eqx.filter_jit
+def _simulate_points(system, omegas, x0, v0, settings, batch_size):
+    x0, v0 = _start(system, x0, v0)
+    problem = _problem(system)
+    x0 = jnp.broadcast_to(x0, omegas.shape + x0.shape[-1:])
+    v0 = jnp.broadcast_to(v0, omegas.shape + v0.shape[-1:])
+
+    def one(args):
+        return _steady_state(problem, *args, settings)
+
+    if batch_size is None:
+        return jax.vmap(one)((omegas, x0, v0))
+    return jax.lax.map(one, (omegas, x0, v0), batch_size=batch_size)
+
+
+def simulate_sweep(system: System, omegas, *, x0=None, v0=None,
+                   settings: TimeDomain = TimeDomain()) -> Trajectory:
+    """A frequency sweep: each point starts from the end state of the one before.
+
+    The order of ``omegas`` is the sweep direction (increasing: up, decreasing:
+    down), so coexisting branches show up as in a run-up or run-down test. A
+    ``lax.scan`` over the last axis of ``omegas``, vmapped over any leading axes
+    (sweep directions, designs): ``omegas`` ``(..., N)`` (rad/s). A point that fails
+    (``max_steps``, ``solver_failed``, ``nonfinite``) passes its own start state on.
+
+    **Arguments:** ``x0``, ``v0``: start of the first point, ``(n,)`` shared or
+    ``(..., n)`` with all the leading axes of ``omegas``; None for the static contact
+    state.
+    **Returns:** a :class:`Trajectory` with leading axes ``(..., N)``.
+    """
+    return _simulate_sweep(system, *_arrays(omegas, x0, v0), settings)
+
+
+@eqx.filter_jit
+def _simulate_sweep(system, omegas, x0, v0, settings):
+    x0, v0 = _start(system, x0, v0)
+    problem = _problem(system)
+
+    def sweep(ws, a, b):
+        def step(carry, w):
+            xa, va = carry
+            tr = _steady_state(problem, w, xa, va, settings)
+            ok = tr.result <= NOT_PERIODIC
+            return (jnp.where(ok, tr.x_end, xa), jnp.where(ok, tr.v_end, va)), tr
+
+        _, out = jax.lax.scan(step, (a, b), ws)
+        return out
+
+    lead = omegas.ndim - 1
+    fn = sweep
+    for _ in range(lead):
+        fn = jax.vmap(fn, in_axes=(0, 0 if x0.ndim > 1 else None, 0 if v0.ndim > 1 else None))
+    return fn(omegas, x0, v0)

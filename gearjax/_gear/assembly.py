@@ -1,0 +1,169 @@
+"""Assembly of a gear train in one gear into the generic ``System`` (model.md).
+
+Coordinates per stage, in order: ``theta_s``, ``theta_r``, ``theta_c`` (absolute
+vibratory rotations) and ``phi_i = theta_pi - theta_c`` for each planet (rad).
+Meshes per stage, in order: ``sp1..spN`` then ``rp1..rpN`` with
+
+    p_si = r_s (theta_s - theta_c) + r_p phi_i - e_si(t)
+    p_ri = r_r (theta_r - theta_c) - r_p phi_i - e_ri(t)
+
+The function is pure in the train's array leaves, so ``jit``, ``vmap`` and ``grad``
+pass through it (design variables are leaves of ``Train``).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._config import require_x64
+from .kinematics import Kinematics, kinematics
+from .phasing import harmonic_phases, stiffness_amplitudes
+from .._engine.system import System
+from .train import MEMBERS, Train, member_index, member_paths
+
+
+def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = None) -> System:
+    """The train in ``gear`` (default: the first) as a :class:`System`.
+
+    Housing springs: ``housing.braked`` for members in the gear's ``brakes``,
+    ``housing.free`` for every other central member; engaged couplings as springs
+    between members; mean torques: ``input_torque`` on the input, ``-input_torque *
+    ratio`` on the output, ``drag_torque`` against the motion of every other free
+    member; ripple on the input member at its orders of the input speed.
+    """
+    require_x64()
+    g = train.gear(gear)
+    kin = kinematics(train, g.name) if kin is None else kin
+    n = train.n_dof
+    H = train.stiffness_harmonics
+    H_e = max([s.transmission_error.sun.shape[0] for s in train.stages]
+              + [s.transmission_error.ring.shape[0] for s in train.stages])
+    M = jnp.zeros((n, n))
+    W_rows, kbar, k_cos, k_sin, back, damp, te_cos, te_sin, radius = ([] for _ in range(9))
+    mesh_mu, labels, groups, sides, planets = [], [], [], [], []
+    dof_labels, dof_group, dof_kind = [], [], []
+    offset = 0
+    for s, sk in zip(train.stages, kin.stages):
+        N = s.n_planets
+        i_s, i_r, i_c = offset, offset + 1, offset + 2
+        r_s, r_p, r_r = s.base_radii()
+        I = s.inertia
+        I_ce = I.carrier + N * (I.planet + s.planet_mass * s.carrier_radius() ** 2)
+        M = M.at[i_s, i_s].set(I.sun).at[i_r, i_r].set(I.ring).at[i_c, i_c].set(I_ce)
+        for i in range(N):
+            ip = offset + 3 + i
+            M = M.at[ip, ip].set(I.planet).at[ip, i_c].set(I.planet).at[i_c, ip].set(I.planet)
+        dof_labels += [f"{s.id}.{m}" for m in MEMBERS] + [f"{s.id}.planet{i + 1}" for i in range(N)]
+        dof_group += [s.id] * (3 + N)
+        dof_kind += ["central"] * 3 + ["planet"] * N
+
+        turning = sk.mesh_frequency != 0
+        mu_n = kin.mu[train.stages.index(s)] if (turning and kin.mu is not None) else 0
+        phases_s, phases_r = harmonic_phases(s, sk.sigma, train.phasing, max(H, H_e))
+        for side, i_j, r_j, I_j, sign, phases in (
+            ("sun", i_s, r_s, I.sun, 1.0, phases_s),
+            ("ring", i_r, r_r, I.ring, -1.0, phases_r),
+        ):
+            k_mean = getattr(s.mesh_stiffness, side)
+            amp = stiffness_amplitudes(getattr(s.contact_ratio, side), H)
+            te = getattr(s.transmission_error, side)
+            te_amp = jnp.zeros(H_e).at[: te.shape[0]].set(te[:, 0])
+            te_phase = jnp.zeros(H_e).at[: te.shape[0]].set(jnp.deg2rad(te[:, 1]))
+            m_eq = I_j * I.planet / (I_j * r_p**2 + I.planet * r_j**2)
+            c = 2 * s.mesh_damping_ratio * jnp.sqrt(k_mean * m_eq)
+            on = 1.0 if turning else 0.0
+            for i in range(N):
+                row = jnp.zeros(n).at[i_j].set(r_j).at[i_c].add(-r_j).at[offset + 3 + i].set(sign * r_p)
+                W_rows.append(row)
+                kbar.append(k_mean)
+                ph = phases[i, :H]
+                k_cos.append(on * amp * jnp.cos(ph))
+                k_sin.append(-on * amp * jnp.sin(ph))
+                ph_e = phases[i, :H_e] + te_phase
+                te_cos.append(on * te_amp * jnp.cos(ph_e))
+                te_sin.append(-on * te_amp * jnp.sin(ph_e))
+                back.append(getattr(s.half_backlash, side))
+                damp.append(c)
+                radius.append(r_j)
+                mesh_mu.append(mu_n)
+                labels.append(f"{s.id}.{side[0]}p{i + 1}")
+                groups.append(s.id)
+                sides.append(side)
+                planets.append(i + 1)
+        offset += 3 + N
+
+    spring_rows, spring_k, spring_class = _springs(train, g, n)
+    f_mean, f_cos, f_sin = _forcing(train, g, kin, n)
+    stack = lambda xs, cols: jnp.stack(xs) if xs else jnp.zeros((0, cols))  # noqa: E731
+    return System(
+        M=M,
+        C=jnp.zeros((n, n)),
+        spring_rows=spring_rows,
+        spring_stiffness=spring_k,
+        W=stack(W_rows, n),
+        kbar=jnp.stack(kbar),
+        k_cos=stack(k_cos, H).reshape(len(labels), H),
+        k_sin=stack(k_sin, H).reshape(len(labels), H),
+        backlash=jnp.stack(back),
+        damping=jnp.stack(damp),
+        te_cos=stack(te_cos, H_e).reshape(len(labels), H_e),
+        te_sin=stack(te_sin, H_e).reshape(len(labels), H_e),
+        mesh_radius=jnp.stack(radius),
+        f_mean=f_mean,
+        f_cos=f_cos,
+        f_sin=f_sin,
+        mesh_mu=tuple(mesh_mu),
+        forcing_mu=tuple(kin.ripple_mu),
+        spring_class=spring_class,
+        contact_damping=train.mesh_damping == "contact",
+        dof_labels=tuple(dof_labels),
+        dof_group=tuple(dof_group),
+        dof_kind=tuple(dof_kind),
+        mesh_labels=tuple(labels),
+        mesh_group=tuple(groups),
+        mesh_side=tuple(sides),
+        mesh_planet=tuple(planets),
+    )
+
+
+def _springs(train: Train, g, n: int):
+    """Housing springs of every central member and the engaged couplings."""
+    rows, ks, classes = [], [], []
+    for path in member_paths(train):
+        braked = path in g.brakes
+        rows.append(jnp.zeros(n).at[member_index(train, path)].set(1.0))
+        ks.append(train.housing.braked if braked else train.housing.free)
+        classes.append("penalty" if braked else "rigid")
+    for c in train.engaged_couplings(g.name):
+        rows.append(jnp.zeros(n).at[member_index(train, c.members[0])].set(1.0)
+                    .at[member_index(train, c.members[1])].set(-1.0))
+        ks.append(c.stiffness)
+        classes.append("penalty" if _at_least(c.stiffness, train.housing.braked) else "elastic")
+    return jnp.stack(rows), jnp.stack(ks), tuple(classes)
+
+
+def _at_least(a, b) -> bool:
+    """``a >= b`` for concrete values; ``False`` (elastic) while tracing."""
+    try:
+        return bool(np.asarray(a) >= np.asarray(b))
+    except Exception:  # traced under jit/vmap: class is a label only
+        return False
+
+
+def _forcing(train: Train, g, kin: Kinematics, n: int):
+    """Mean torques and input-torque ripple columns (N m)."""
+    f = jnp.zeros(n)
+    i_in, i_out = member_index(train, g.input), member_index(train, g.output)
+    f = f.at[i_in].add(g.input_torque)
+    f = f.at[i_out].add(-g.input_torque * float(kin.ratio))
+    for path, w in kin.speeds.items():
+        if path in (g.input, g.output) or path in g.brakes or w == 0:
+            continue
+        f = f.at[member_index(train, path)].add(-g.drag_torque * (1.0 if w > 0 else -1.0))
+    ripple = g.input_torque_ripple
+    L = ripple.shape[0]
+    amp, phase = ripple[:, 0], jnp.deg2rad(ripple[:, 1])
+    f_cos = jnp.zeros((n, L)).at[i_in].set(amp * jnp.cos(phase))
+    f_sin = jnp.zeros((n, L)).at[i_in].set(-amp * jnp.sin(phase))
+    return f, f_cos, f_sin

@@ -1,0 +1,473 @@
+"""Train files: TOML in (with field-by-field checks) and TOML out (round trip).
+
+Reading checks every key's type and sign as it goes and names the file, field,
+value and rule of the first thing that is wrong, then every value's bounds
+(``_validate.check_ranges``); whole-train rules (member paths, kinematics, planet
+overlap) and the geometry and range warnings live in ``_validate``. A file that cannot
+be read (missing, a directory, not UTF-8, not TOML) is refused the same way.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+import tomli_w
+
+from .._errors import fail
+from .train import (
+    Coupling,
+    Gear,
+    Housing,
+    Inertia,
+    Stage,
+    SunRing,
+    Teeth,
+    Train,
+    TransmissionError,
+)
+from .validate import check_ranges, validate_train
+
+BUNDLED_EXAMPLE = "al_shyyab_2009.toml"
+
+_TOP_KEYS = {"name", "stiffness_harmonics", "phasing", "mesh_damping", "stages", "couplings",
+             "housing", "gears"}
+_STAGE_KEYS = {"id", "teeth", "module_mm", "pressure_angle_deg", "planet_angles_deg",
+               "carrier_radius_mm", "contact_ratio", "mesh_stiffness", "mesh_damping_ratio",
+               "half_backlash", "sun_ring_phase_deg", "stage_phase_deg", "transmission_error",
+               "inertia", "planet_mass"}
+_COUPLING_KEYS = {"members", "stiffness", "id", "gears"}
+_HOUSING_KEYS = {"braked", "free"}
+_GEAR_KEYS = {"input", "output", "brakes", "input_torque", "input_torque_ripple", "drag_torque",
+              "note"}
+PHASING_RULES = ("physical", "paper")
+MESH_DAMPING_RULES = ("always", "contact")
+
+
+def bundled_example_path() -> Path:
+    """Path of the bundled paper case (the shared example plus its inferred gears)."""
+    return Path(str(resources.files("gearjax") / "data" / BUNDLED_EXAMPLE))
+
+
+def load_train(path: str | Path | None = None, *, validate: bool = True) -> Train:
+    """Read and check a train file; ``None`` reads the bundled paper case.
+
+    **Raises:** ``TrainError`` (a ``ValueError``) with one line naming file, field,
+    value and rule, also for a file that cannot be read or is not UTF-8 TOML. Geometry
+    rules that published data break, and unusual values, are warnings
+    (``GeometryWarning``, ``RangeWarning``: both ``TrainWarning``), not errors.
+    """
+    path = bundled_example_path() if path is None else Path(path)
+    source = str(path)
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        reason = e.strerror or type(e).__name__
+        raise fail(source, "file", source, f"cannot be read ({reason})") from None
+    return loads_train(_decode(data, source), source=source, validate=validate)
+
+
+def _decode(data: bytes, source: str) -> str:
+    """UTF-8 text of a train file; a UTF-8 byte-order mark (Windows editors) is dropped."""
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise fail(source, "file", source,
+                   "is UTF-16 text (it starts with a UTF-16 byte-order mark); a train file is "
+                   "TOML and must be saved as UTF-8")
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        raise fail(source, "file", source,
+                   f"contains NUL bytes (the first at offset {nul}): a binary file, "
+                   "or UTF-16 text without a byte-order mark; a train file is TOML and must be "
+                   "saved as UTF-8")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        raise fail(source, "file", source,
+                   f"is not UTF-8 text (byte 0x{data[e.start]:02x} at offset {e.start}, line "
+                   f"{line}); a train file is TOML and must be saved as UTF-8") from None
+
+
+def loads_train(text: str, source: str | None = None, *, validate: bool = True) -> Train:
+    """Parse train-file text. ``source`` names it in messages and sets the default name."""
+    if text.startswith("\ufeff"):  # a byte-order mark, as Windows editors write
+        text = text[1:]
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        where = str(e)
+        if "line" not in where:  # "(at end of document)": say where that is
+            last = text.rsplit("\n", 1)[-1]
+            where += f" (the end is line {text.count(chr(10)) + 1}, column {len(last) + 1})"
+        raise fail(source, "file", "<TOML>", f"is not valid TOML ({where})") from None
+    except RecursionError:
+        raise fail(source, "file", "<TOML>",
+                   "is not a train file: arrays or tables nested too deeply to read") from None
+    train = train_from_dict(raw, source)
+    if validate:
+        validate_train(train)
+    return train
+
+
+def train_from_dict(raw: dict, source: str | None = None) -> Train:
+    """Build a :class:`Train` from parsed TOML, checking types and single-value rules."""
+    r = _Reader(source)
+    r.keys(raw, _TOP_KEYS, "file")
+    default_name = Path(source).stem if source else "train"
+    name = r.string(raw, "name", "name", default=default_name)
+    harmonics = r.integer(raw, "stiffness_harmonics", "stiffness_harmonics", default=4, low=0)
+    phasing = r.choice(raw, "phasing", "phasing", PHASING_RULES, default="physical")
+    damping = r.choice(raw, "mesh_damping", "mesh_damping", MESH_DAMPING_RULES, default="always")
+
+    stages_raw = raw.get("stages")
+    if not isinstance(stages_raw, list) or not stages_raw:
+        raise fail(source, "stages", stages_raw, "at least one [[stages]] table is required")
+    stages = tuple(_stage(r, s, i) for i, s in enumerate(stages_raw))
+    ids = [s.id for s in stages]
+    for i, sid in enumerate(ids):
+        if sid in ids[:i]:
+            raise fail(source, f"stages[{i}].id", sid, "stage ids must be unique")
+
+    couplings_raw = raw.get("couplings", [])
+    if not isinstance(couplings_raw, list):
+        raise fail(source, "couplings", couplings_raw, "must be an array of [[couplings]] tables")
+    couplings = tuple(_coupling(r, c, i) for i, c in enumerate(couplings_raw))
+
+    housing_raw = raw.get("housing", {})
+    r.table(housing_raw, "housing")
+    r.keys(housing_raw, _HOUSING_KEYS, "housing")
+    housing = Housing(
+        braked=r.number(housing_raw, "braked", "housing.braked", default=1e10, low=0.0),
+        free=r.number(housing_raw, "free", "housing.free", default=1e2, low=0.0),
+    )
+
+    gears_raw = raw.get("gears")
+    if not isinstance(gears_raw, dict) or not gears_raw:
+        raise fail(source, "gears", gears_raw, "at least one [gears.NAME] table is required")
+    gears = tuple(_gear(r, name, g) for name, g in gears_raw.items())
+    train = Train(
+        name=name,
+        stages=stages,
+        couplings=couplings,
+        housing=housing,
+        gears=gears,
+        stiffness_harmonics=harmonics,
+        phasing=phasing,
+        mesh_damping=damping,
+        source=source,
+    )
+    check_ranges(train)  # bounds of every value (warnings come from validate_train)
+    return train
+
+
+def _stage(r: _Reader, raw, i: int) -> Stage:
+    r.table(raw, f"stages[{i}]")
+    sid = raw.get("id")
+    if not isinstance(sid, str) or not sid or "." in sid:
+        raise r.fail(f"stages[{i}].id", sid, "a non-empty string without '.' is required")
+    f = f"{sid}."  # field prefix: TOML paths start with the stage id
+    r.keys(raw, _STAGE_KEYS, f"stages[{i}] (id {sid!r})")
+    teeth_raw = r.sub(raw, "teeth", f + "teeth", {"sun", "planet", "ring"})
+    teeth = Teeth(**{k: r.integer(teeth_raw, k, f"{f}teeth.{k}", low=1, rule="teeth must be >= 1")
+                     for k in ("sun", "planet", "ring")})
+    module = r.number(raw, "module_mm", f + "module_mm", low=0.0, strict=True)
+    pressure = r.number(raw, "pressure_angle_deg", f + "pressure_angle_deg", low=0.0, strict=True)
+    if not float(pressure) < 90.0:
+        raise r.fail(f + "pressure_angle_deg", float(pressure), "must be between 0 and 90 degrees")
+    angles = r.vector(raw, "planet_angles_deg", f + "planet_angles_deg")
+    if angles.size < 1:
+        raise r.fail(f + "planet_angles_deg", [], "at least one planet is required")
+    if angles[0] != 0.0 or np.any(np.diff(angles) <= 0.0) or angles[-1] >= 360.0:
+        raise r.fail(f + "planet_angles_deg", angles.tolist(),
+                     "planet angles must start at 0 and increase strictly, below 360")
+    inertia = r.sub(raw, "inertia", f + "inertia", {"sun", "ring", "carrier", "planet"})
+    carrier = None
+    if "carrier_radius_mm" in raw:
+        carrier = r.number(raw, "carrier_radius_mm", f + "carrier_radius_mm", low=0.0, strict=True)
+    return Stage(
+        id=sid,
+        teeth=teeth,
+        module_mm=module,
+        pressure_angle_deg=pressure,
+        planet_angles_deg=jnp.asarray(angles),
+        carrier_radius_mm=carrier,
+        contact_ratio=r.sun_ring(raw, "contact_ratio", f, low=1.0, rule="must be >= 1"),
+        mesh_stiffness=r.sun_ring(raw, "mesh_stiffness", f, low=0.0, strict=True),
+        mesh_damping_ratio=r.number(raw, "mesh_damping_ratio", f + "mesh_damping_ratio",
+                                    default=0.04, low=0.0),
+        half_backlash=r.sun_ring(raw, "half_backlash", f, low=0.0, default=0.0),
+        sun_ring_phase_deg=r.number(raw, "sun_ring_phase_deg", f + "sun_ring_phase_deg",
+                                    default=0.0),
+        stage_phase_deg=r.number(raw, "stage_phase_deg", f + "stage_phase_deg", default=0.0),
+        transmission_error=_transmission_error(r, raw, f),
+        inertia=Inertia(**{
+            k: r.number(inertia, k, f"{f}inertia.{k}", low=0.0, strict=True)
+            for k in ("sun", "ring", "carrier", "planet")
+        }),
+        planet_mass=r.number(raw, "planet_mass", f + "planet_mass", low=0.0, strict=True),
+    )
+
+
+def _transmission_error(r: _Reader, raw, f: str) -> TransmissionError:
+    te = raw.get("transmission_error", {})
+    r.table(te, f + "transmission_error")
+    r.keys(te, {"sun", "ring"}, f + "transmission_error")
+    sides = {}
+    for side in ("sun", "ring"):
+        rows = r.matrix(te, side, f"{f}transmission_error.{side}", 2,
+                        "one [amplitude_m, phase_deg] pair per mesh harmonic")
+        if np.any(rows[:, 0] < 0):
+            raise r.fail(f"{f}transmission_error.{side}", rows.tolist(),
+                         "amplitudes must be >= 0 (use the phase for sign)")
+        sides[side] = jnp.asarray(rows)
+    return TransmissionError(**sides)
+
+
+def _coupling(r: _Reader, raw, i: int) -> Coupling:
+    f = f"couplings[{i}]"
+    r.table(raw, f)
+    r.keys(raw, _COUPLING_KEYS, f)
+    members = raw.get("members")
+    if (not isinstance(members, list) or len(members) != 2
+            or not all(isinstance(m, str) for m in members)):
+        raise r.fail(f + ".members", members, "two member paths such as \"1.carrier\" are required")
+    cid = raw.get("id")
+    if cid is not None and not isinstance(cid, str):
+        raise r.fail(f + ".id", cid, "must be a string")
+    gears = raw.get("gears")
+    if gears is not None:
+        if not isinstance(gears, list) or not all(isinstance(g, str) for g in gears):
+            raise r.fail(f + ".gears", gears, "must be a list of gear names")
+        gears = tuple(gears)
+    return Coupling(
+        members=(members[0], members[1]),
+        stiffness=r.number(raw, "stiffness", f + ".stiffness", low=0.0),
+        id=cid,
+        gears=gears,
+    )
+
+
+def _gear(r: _Reader, name: str, raw) -> Gear:
+    f = f"gears.{name}"
+    r.table(raw, f)
+    r.keys(raw, _GEAR_KEYS, f)
+    paths = {}
+    for key in ("input", "output"):
+        value = raw.get(key)
+        if not isinstance(value, str):
+            raise r.fail(f"{f}.{key}", value, "a member path such as \"1.sun\" is required")
+        paths[key] = value
+    brakes = raw.get("brakes", [])
+    if not isinstance(brakes, list) or not all(isinstance(b, str) for b in brakes):
+        raise r.fail(f + ".brakes", brakes, "must be a list of member paths")
+    ripple = r.matrix(raw, "input_torque_ripple", f + ".input_torque_ripple", 3,
+                      "rows [amplitude_Nm, phase_deg, order]")
+    if np.any(ripple[:, 2] <= 0):
+        raise r.fail(f + ".input_torque_ripple", ripple.tolist(),
+                     "orders (third column) must be > 0")
+    note = raw.get("note")
+    if note is not None and not isinstance(note, str):
+        raise r.fail(f + ".note", note, "must be a string")
+    return Gear(
+        name=name,
+        input=paths["input"],
+        output=paths["output"],
+        brakes=tuple(brakes),
+        input_torque=r.number(raw, "input_torque", f + ".input_torque"),
+        input_torque_ripple=jnp.asarray(ripple[:, :2]),
+        drag_torque=r.number(raw, "drag_torque", f + ".drag_torque", default=0.0, low=0.0),
+        ripple_orders=tuple(float(o) for o in ripple[:, 2]),
+        note=note,
+    )
+
+
+class _Reader:
+    """Typed access to raw TOML values, failing with file, field, value and rule."""
+
+    _MISSING = object()
+
+    def __init__(self, source: str | None):
+        self.source = source
+
+    def fail(self, field: str, value, rule: str):
+        return fail(self.source, field, value, rule)
+
+    def table(self, value, field: str) -> None:
+        if not isinstance(value, dict):
+            raise self.fail(field, value, "must be a table")
+
+    def keys(self, raw: dict, allowed: set[str], field: str) -> None:
+        for key in raw:
+            if key not in allowed:
+                raise self.fail(f"{field} key", key,
+                                f"unknown key; known keys are {', '.join(sorted(allowed))}")
+
+    def sub(self, raw: dict, key: str, field: str, keys: set[str]) -> dict:
+        value = raw.get(key, self._MISSING)
+        if value is self._MISSING:
+            raise self.fail(field, None, "is required")
+        self.table(value, field)
+        self.keys(value, keys, field)
+        return value
+
+    def _get(self, raw: dict, key: str, field: str, default):
+        value = raw.get(key, self._MISSING)
+        if value is self._MISSING:
+            if default is self._MISSING:
+                raise self.fail(field, None, "is required")
+            return default
+        return value
+
+    def number(self, raw, key, field, *, default=_MISSING, low=None, strict=False, rule=None):
+        value = self._get(raw, key, field, default)
+        if not _finite(value):
+            raise self.fail(field, value, "must be a finite number")
+        if low is not None and (value <= low if strict else value < low):
+            raise self.fail(field, value, rule or f"must be {'>' if strict else '>='} {low:g}")
+        return jnp.asarray(float(value))
+
+    def integer(self, raw, key, field, *, default=_MISSING, low=None, rule=None) -> int:
+        value = self._get(raw, key, field, default)
+        if isinstance(value, bool) or not isinstance(value, int):
+            # a type error names the type rule, never the range rule (30.5 teeth is not "< 1")
+            if isinstance(value, float) and value.is_integer():
+                raise self.fail(field, value, "must be an integer (no decimal point)")
+            raise self.fail(field, value, "must be an integer")
+        if low is not None and value < low:
+            raise self.fail(field, value, rule or f"must be >= {low}")
+        return value
+
+    def string(self, raw, key, field, *, default=_MISSING) -> str:
+        value = self._get(raw, key, field, default)
+        if not isinstance(value, str):
+            raise self.fail(field, value, "must be a string")
+        return value
+
+    def choice(self, raw, key, field, options, *, default=_MISSING) -> str:
+        value = self._get(raw, key, field, default)
+        if value not in options:
+            raise self.fail(field, value, f"must be one of {', '.join(map(repr, options))}")
+        return value
+
+    def vector(self, raw, key, field) -> np.ndarray:
+        value = self._get(raw, key, field, self._MISSING)
+        if not isinstance(value, list) or not all(_finite(v) for v in value):
+            raise self.fail(field, value, "must be a list of finite numbers")
+        return np.asarray(value, dtype=np.float64)
+
+    def matrix(self, raw, key, field, columns: int, what: str) -> np.ndarray:
+        value = raw.get(key, [])
+        ok = isinstance(value, list) and all(
+            isinstance(row, list) and len(row) == columns
+            and all(_finite(v) for v in row)
+            for row in value
+        )
+        if not ok:
+            raise self.fail(field, value, f"must be a list of {what}")
+        return np.asarray(value, dtype=np.float64).reshape(len(value), columns)
+
+    def sun_ring(self, raw, key, f, *, low=None, strict=False, default=_MISSING, rule=None):
+        value = self._get(raw, key, f + key, default)
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            value = {"sun": value, "ring": value}  # one number for both sides
+        self.table(value, f + key)
+        self.keys(value, {"sun", "ring"}, f + key)
+        return SunRing(**{
+            side: self.number(value, side, f"{f}{key}.{side}", low=low, strict=strict,
+                              default=default, rule=rule)
+            for side in ("sun", "ring")
+        })
+
+
+def _finite(value) -> bool:
+    """A TOML number that is a finite float64 (not a bool, not an integer too large)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:  # an integer beyond 1.8e308
+        return False
+
+
+# --------------------------------------------------------------------------- writing
+
+def train_to_dict(train: Train) -> dict:
+    """The train as a TOML-ready dict (inverse of :func:`train_from_dict`)."""
+    out: dict = {
+        "name": train.name,
+        "stiffness_harmonics": train.stiffness_harmonics,
+        "phasing": train.phasing,
+        "mesh_damping": train.mesh_damping,
+    }
+    stages = []
+    for s in train.stages:
+        d = {
+            "id": s.id,
+            "teeth": {"sun": s.teeth.sun, "planet": s.teeth.planet, "ring": s.teeth.ring},
+            "module_mm": _f(s.module_mm),
+            "pressure_angle_deg": _f(s.pressure_angle_deg),
+            "planet_angles_deg": [_f(a) for a in np.asarray(s.planet_angles_deg)],
+        }
+        if s.carrier_radius_mm is not None:
+            d["carrier_radius_mm"] = _f(s.carrier_radius_mm)
+        for key in ("contact_ratio", "mesh_stiffness", "half_backlash"):
+            pair = getattr(s, key)
+            d[key] = {"sun": _f(pair.sun), "ring": _f(pair.ring)}
+        d["mesh_damping_ratio"] = _f(s.mesh_damping_ratio)
+        d["sun_ring_phase_deg"] = _f(s.sun_ring_phase_deg)
+        d["stage_phase_deg"] = _f(s.stage_phase_deg)
+        te = {side: [[_f(v) for v in row] for row in np.asarray(getattr(s.transmission_error, side))]
+              for side in ("sun", "ring")}
+        te = {k: v for k, v in te.items() if v}
+        if te:
+            d["transmission_error"] = te
+        d["inertia"] = {k: _f(getattr(s.inertia, k)) for k in ("sun", "ring", "carrier", "planet")}
+        d["planet_mass"] = _f(s.planet_mass)
+        stages.append(d)
+    out["stages"] = stages
+    couplings = []
+    for c in train.couplings:
+        d = {}
+        if c.id is not None:
+            d["id"] = c.id
+        d["members"] = list(c.members)
+        d["stiffness"] = _f(c.stiffness)
+        if c.gears is not None:
+            d["gears"] = list(c.gears)
+        couplings.append(d)
+    if couplings:
+        out["couplings"] = couplings
+    out["housing"] = {"braked": _f(train.housing.braked), "free": _f(train.housing.free)}
+    gears = {}
+    for g in train.gears:
+        d = {"input": g.input, "output": g.output, "brakes": list(g.brakes),
+             "input_torque": _f(g.input_torque)}
+        ripple = np.asarray(g.input_torque_ripple)
+        if ripple.size:
+            d["input_torque_ripple"] = [[_f(a), _f(ph), float(o)]
+                                        for (a, ph), o in zip(ripple, g.ripple_orders)]
+        d["drag_torque"] = _f(g.drag_torque)
+        if g.note is not None:
+            d["note"] = g.note
+        gears[g.name] = d
+    out["gears"] = gears
+    return out
+
+
+def dumps_train(train: Train) -> str:
+    """TOML text of a train; :func:`loads_train` reads it back to the same values."""
+    header = f"# {train.name}\n# written by gearjax; SI units unless a key's suffix says otherwise\n\n"
+    return header + tomli_w.dumps(train_to_dict(train))
+
+
+def save_train(train: Train, path: str | Path) -> None:
+    """Write ``train`` as a train file at ``path``."""
+    Path(path).write_text(dumps_train(train))
+
+
+def _f(x) -> float:
+    return float(np.asarray(x))

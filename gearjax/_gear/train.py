@@ -1,0 +1,216 @@
+"""Train parameters: the train file's values as equinox modules.
+
+Field names and units mirror the train-file keys of interface.md (so a TOML path
+such as ``1.inertia.sun`` or ``2.module_mm`` names a field), which keeps the
+loader, the writer and the path lookup one-to-one. Every physical value is an
+array field (traced by ``jit``, ``vmap`` and ``grad``); structural values (teeth,
+ids, member paths, option strings) are static. Conversion to SI and radians
+happens once, in assembly.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from .._errors import bad_argument
+
+MEMBERS = ("sun", "ring", "carrier")
+"""Central members of a stage, in the order of their coordinates."""
+
+
+class Teeth(eqx.Module):
+    """Tooth counts of one stage (static integers)."""
+
+    sun: int = eqx.field(static=True)
+    planet: int = eqx.field(static=True)
+    ring: int = eqx.field(static=True)
+
+
+class SunRing(eqx.Module):
+    """A value per mesh side of a stage: sun-planet and ring-planet."""
+
+    sun: Float[Array, "*batch"]
+    ring: Float[Array, "*batch"]
+
+
+class TransmissionError(eqx.Module):
+    """Transmission-error harmonics per mesh side.
+
+    **Fields:** ``sun``, ``ring``: shape ``(H_e, 2)``, each row ``(amplitude [m],
+    phase [deg])`` of harmonic ``h = row + 1`` of the stage mesh frequency. Zero rows
+    mean no excitation.
+    """
+
+    sun: Float[Array, "H 2"]
+    ring: Float[Array, "H 2"]
+
+
+class Inertia(eqx.Module):
+    """Polar moments of inertia (kg m^2) of a stage's members; ``planet`` is one planet."""
+
+    sun: Float[Array, ""]
+    ring: Float[Array, ""]
+    carrier: Float[Array, ""]
+    planet: Float[Array, ""]
+
+
+class Stage(eqx.Module):
+    """One simple planetary stage: sun, ring, carrier and ``N`` planets.
+
+    Units are those of the train-file keys: ``module_mm`` in mm, angles in degrees,
+    stiffness in N/m, backlash in m, inertia in kg m^2, mass in kg.
+    """
+
+    id: str = eqx.field(static=True)
+    teeth: Teeth
+    module_mm: Float[Array, ""]
+    pressure_angle_deg: Float[Array, ""]
+    planet_angles_deg: Float[Array, " N"]
+    carrier_radius_mm: Float[Array, ""] | None
+    contact_ratio: SunRing
+    mesh_stiffness: SunRing
+    mesh_damping_ratio: Float[Array, ""]
+    half_backlash: SunRing
+    sun_ring_phase_deg: Float[Array, ""]
+    stage_phase_deg: Float[Array, ""]
+    transmission_error: TransmissionError
+    inertia: Inertia
+    planet_mass: Float[Array, ""]
+
+    @property
+    def n_planets(self) -> int:
+        return self.planet_angles_deg.shape[-1]
+
+    def carrier_radius(self) -> Float[Array, ""]:
+        """Planet-centre radius (m): given, or ``module (Z_s + Z_p) / 2``."""
+        if self.carrier_radius_mm is not None:
+            return self.carrier_radius_mm * 1e-3
+        return self.module_mm * 1e-3 * (self.teeth.sun + self.teeth.planet) / 2
+
+    def base_radii(self) -> tuple[Array, Array, Array]:
+        """Base radii (m) of sun, planet, ring: ``m Z cos(alpha) / 2``."""
+        half = self.module_mm * 1e-3 * jnp.cos(jnp.deg2rad(self.pressure_angle_deg)) / 2
+        return half * self.teeth.sun, half * self.teeth.planet, half * self.teeth.ring
+
+
+class Coupling(eqx.Module):
+    """A torsional spring (N m/rad) between central members of two stages.
+
+    Permanent when ``gears`` is None, otherwise a clutch engaged only in those gears.
+    """
+
+    members: tuple[str, str] = eqx.field(static=True)
+    stiffness: Float[Array, ""]
+    id: str | None = eqx.field(static=True, default=None)
+    gears: tuple[str, ...] | None = eqx.field(static=True, default=None)
+
+    def engaged(self, gear: str) -> bool:
+        return self.gears is None or gear in self.gears
+
+    @property
+    def label(self) -> str:
+        return self.id if self.id is not None else "-".join(self.members)
+
+
+class Housing(eqx.Module):
+    """Torsional stiffness (N m/rad) of central members to the housing."""
+
+    braked: Float[Array, ""]
+    free: Float[Array, ""]
+
+
+class Gear(eqx.Module):
+    """A power-flow configuration: input, output, brakes and loads.
+
+    ``input_torque_ripple`` has shape ``(L, 2)``, rows ``(amplitude [N m], phase [deg])``
+    at ``ripple_orders`` (static: they set frequencies, so they are structure), each a
+    multiple of the input shaft speed. The train file writes the three together as
+    ``[[amplitude, phase_deg, order], ...]``.
+    """
+
+    name: str = eqx.field(static=True)
+    input: str = eqx.field(static=True)
+    output: str = eqx.field(static=True)
+    brakes: tuple[str, ...] = eqx.field(static=True)
+    input_torque: Float[Array, ""]
+    input_torque_ripple: Float[Array, "L 2"]
+    drag_torque: Float[Array, ""]
+    ripple_orders: tuple[float, ...] = eqx.field(static=True, default=())
+    note: str | None = eqx.field(static=True, default=None)
+
+
+class Train(eqx.Module):
+    """A compound planetary train: stages, couplings, housing and gears.
+
+    ``source`` is the file it was read from (for messages), ``None`` if built in code.
+    """
+
+    name: str = eqx.field(static=True)
+    stages: tuple[Stage, ...]
+    couplings: tuple[Coupling, ...]
+    housing: Housing
+    gears: tuple[Gear, ...]
+    stiffness_harmonics: int = eqx.field(static=True, default=4)
+    phasing: str = eqx.field(static=True, default="physical")
+    mesh_damping: str = eqx.field(static=True, default="always")
+    source: str | None = eqx.field(static=True, default=None)
+
+    @property
+    def stage_ids(self) -> tuple[str, ...]:
+        return tuple(s.id for s in self.stages)
+
+    @property
+    def gear_names(self) -> tuple[str, ...]:
+        return tuple(g.name for g in self.gears)
+
+    @property
+    def n_dof(self) -> int:
+        """``3 d + sum_n N_n``: sun, ring, carrier and planets of every stage."""
+        return sum(3 + s.n_planets for s in self.stages)
+
+    def stage(self, stage_id: str) -> Stage:
+        for s in self.stages:
+            if s.id == stage_id:
+                return s
+        raise KeyError(f"no stage {stage_id!r}; stages are {list(self.stage_ids)}")
+
+    def gear(self, name: str | None = None) -> Gear:
+        """The gear called ``name``; the first gear in the file when ``None``."""
+        if name is None:
+            return self.gears[0]
+        for g in self.gears:
+            if g.name == name:
+                return g
+        raise bad_argument("gear", name, f"no such gear in {self.source or 'the train'}; "
+                           f"gears are {list(self.gear_names)}")
+
+    def engaged_couplings(self, gear: str) -> tuple[Coupling, ...]:
+        return tuple(c for c in self.couplings if c.engaged(gear))
+
+
+def member_index(train: Train, path: str) -> int:
+    """Coordinate index of central member ``path`` (``"ID.sun|ring|carrier"``)."""
+    stage_id, _, member = path.rpartition(".")
+    offset = 0
+    for s in train.stages:
+        if s.id == stage_id:
+            return offset + MEMBERS.index(member)
+        offset += 3 + s.n_planets
+    raise KeyError(path)
+
+
+def planet_index(train: Train, stage_id: str, planet: int) -> int:
+    """Coordinate index of planet ``planet`` (0-based) of stage ``stage_id``."""
+    offset = 0
+    for s in train.stages:
+        if s.id == stage_id:
+            return offset + 3 + planet
+        offset += 3 + s.n_planets
+    raise KeyError(stage_id)
+
+
+def member_paths(train: Train) -> tuple[str, ...]:
+    """Every central member path, in coordinate order."""
+    return tuple(f"{s.id}.{m}" for s in train.stages for m in MEMBERS)

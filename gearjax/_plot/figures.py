@@ -1,0 +1,394 @@
+"""Figures returned as ``matplotlib.figure.Figure`` objects (not saved, no pyplot state),
+for notebooks and interactive use: the Campbell diagram, the paper's frequency-response
+figures (RMS force or mean torque per stage, a sweep over a reference sweep, time
+integration points on top) and the tooth-separation map.
+
+The saving, command-line figures are in ``_plot``; these draw the same Datasets
+(``_results`` layout) and :class:`~gearjax._gear.campbell.Campbell` data.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import numpy as np
+
+from .._gear.campbell import Campbell
+from .save import clip_to_stable
+
+WHAT = {"rms": ("rms_force", "RMS mesh force (N)"), "dlf": ("dlf", "dynamic load factor"),
+        "separation": ("separation", "share of period in separation"),
+        "torque": ("mean_torque", "mean transmitted torque (N m)"),
+        "max": ("max_force", "peak mesh force (N)")}
+"""``what`` of :func:`response_figure`: the Dataset variable and its axis label."""
+
+SIDE_COLORS = {"sun": "tab:blue", "ring": "tab:orange"}
+
+
+def _figure(width: float, height: float, rows: int = 1, cols: int = 1, **kw):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, height), layout="constrained")
+    axes = fig.subplots(rows, cols, squeeze=False, **kw)
+    return fig, axes
+
+
+# ------------------------------------------------------------------ Campbell
+
+
+def campbell_figure(diagrams: Campbell | Sequence[Campbell], max_hz: float | None = None,
+                    cols: int = 2):
+    """Campbell diagram(s): one panel per :class:`~gearjax._gear.campbell.Campbell`.
+
+    Rays ``h x`` per turning stage (colour per stage; dotted for an unloaded stage),
+    elastic natural frequencies as horizontal lines (grey; planet modes dashed, with
+    their multiplicity), crossings as circles: filled where the stiffness excitation
+    drives the mode at first order, open where the planet phasing cancels it (or the
+    stage is unloaded). ``max_hz``: top of the frequency axis (default: a little above
+    the highest ray or mode shown). **Returns:** the Figure.
+    """
+    diagrams = [diagrams] if isinstance(diagrams, Campbell) else list(diagrams)
+    cols = max(1, min(cols, len(diagrams)))
+    rows = -(-len(diagrams) // cols)
+    fig, axes = _figure(5.0 * cols, 3.5 * rows, rows, cols)
+    for ax, d in zip(axes.flat, diagrams):
+        top = max_hz or 1.05 * max([float(d.mode_hz.max()) if d.mode_hz.size else 0.0]
+                                   + [float(d.excitation_hz.max()) if d.excitation_hz.size
+                                      else 0.0] + [1.0])
+        label_y = -np.inf  # mode labels in the right margin, kept apart
+        for k, hz in enumerate(d.mode_hz):
+            if hz > top:
+                continue
+            planet = d.mode_family[k] == "planet"
+            ax.axhline(hz / 1e3, color="0.55", lw=0.8, ls="--" if planet else "-", zorder=1)
+            tag = f"planet {d.mode_stage[k]} x{d.mode_multiplicity[k]}" if planet else ""
+            label_y = max(hz / 1e3, label_y + 0.045 * top / 1e3)
+            ax.annotate(f"{hz / 1e3:.2f} kHz {tag}".strip(), (1.0, label_y),
+                        xycoords=("axes fraction", "data"), xytext=(3, 0),
+                        textcoords="offset points", va="center", fontsize=7, color="0.35",
+                        annotation_clip=False)
+        for i, sid in enumerate(d.stages):
+            color = f"C{i}"
+            style = "-" if d.loaded[i] else ":"
+            for j, h in enumerate(d.harmonics):
+                y = d.excitation_hz[i, j] / 1e3
+                ax.plot(d.rpm, y, style, color=color, lw=1.6 - 0.25 * min(j, 4),
+                        label=f"stage {sid}" + ("" if d.loaded[i] else " (unloaded)")
+                        if j == 0 else None, zorder=2)
+                # label the ray just inside the point where it leaves the plot
+                x_end = min(d.rpm[-1], 0.97 * top / (h * d.mesh_hz_per_rpm[i]))
+                ax.annotate(f"{h}x", (x_end, h * d.mesh_hz_per_rpm[i] * x_end / 1e3),
+                            fontsize=7, color=color, xytext=(2, -8),
+                            textcoords="offset points")
+        for c in d.crossings:
+            if c.hz > top:
+                continue
+            color = f"C{d.stages.index(c.stage)}"
+            ax.plot([c.rpm], [c.hz / 1e3], "o", ms=5, color=color,
+                    mfc=color if c.excited else "white", zorder=3)
+        if not d.stages:
+            ax.text(0.5, 0.25, "no mesh turns in this gear", transform=ax.transAxes,
+                    ha="center", fontsize=9, color="0.3",
+                    bbox={"facecolor": "white", "edgecolor": "none"})
+        ax.set_xlim(d.rpm[0], d.rpm[-1])
+        ax.set_ylim(0.0, top / 1e3)
+        ax.set_xlabel(f"input speed ({d.input}), rpm")
+        ax.set_ylabel("frequency (kHz)")
+        ax.set_title(f"gear {d.gear}: filled crossings = modes the mesh stiffness drives",
+                     fontsize=9)
+        ax.grid(alpha=0.25)
+        if d.stages:
+            ax.legend(fontsize=7, loc="lower right")
+    for ax in list(axes.flat)[len(diagrams):]:
+        ax.set_visible(False)
+    return fig
+
+
+# ------------------------------------------------------------------ responses
+
+
+def response_figure(sweep=None, reference=None, points=None, what: str = "rms",
+                    xlim: tuple[float, float] | None = None, title: str = "",
+                    labels: tuple[str, str, str] = ("harmonic balance", "reference",
+                                                    "time integration")):
+    """The paper's Figs 4-6: a response of every mesh against reference-stage mesh
+    frequency (kHz), one panel per stage, sun meshes blue and ring meshes orange (every
+    planet drawn; by cyclic symmetry they usually coincide).
+
+    **Arguments:** ``sweep``: results Dataset drawn solid where stable, dashed where
+    unstable, dotted where unknown; ``reference``: another sweep (e.g. the linear one)
+    drawn as a thin dotted line; ``points``: a Dataset of single points (time
+    integration) drawn as open circles (converged) or crosses (not); ``what``: a key of
+    :data:`WHAT`; ``xlim``: kHz (default: the range of ``sweep``, else of all data);
+    ``labels``: legend names of the three. **Returns:** the Figure.
+    """
+    var, ylabel = WHAT[what]
+    first = next(ds for ds in (sweep, reference, points) if ds is not None)
+    stages = list(dict.fromkeys(np.asarray(first["stage"]).tolist()))
+    fig, axes = _figure(10.0, 3.0 * len(stages), len(stages), 1, sharex=True)
+    shown = [[] for _ in stages]  # per panel: (f kHz, value, not unstable) of every point
+    for r, stage in enumerate(stages):
+        ax = axes[r, 0]
+        for role, ds in (("reference", reference), ("sweep", sweep), ("points", points)):
+            if ds is None:
+                continue
+            f = np.asarray(ds["mesh_frequency_hz"]) / 1e3
+            sel = np.where(np.asarray(ds["stage"]) == stage)[0]
+            for j in sel:
+                side = str(ds["side"].values[j])
+                color = SIDE_COLORS.get(side, "k")
+                first_of_side = j == next(k for k in sel if str(ds["side"].values[k]) == side)
+                y = np.asarray(ds[var])[:, j]
+                not_unstable = (np.asarray(ds["stable"]) != 0 if role == "sweep"
+                                and "stable" in ds else np.ones(f.shape, bool))
+                shown[r].append((f, y, not_unstable))
+                tag = f"{side}, " if first_of_side else None
+                if role == "reference":
+                    order = np.argsort(f)
+                    ax.plot(f[order], y[order], ":", lw=0.9, color=color,
+                            label=tag and tag + labels[1])
+                elif role == "sweep":
+                    stable = np.asarray(ds["stable"]) if "stable" in ds else np.full(f.shape, -1)
+                    for flag, style in ((1, "-"), (0, "--"), (-1, ":")):
+                        if not np.any(stable == flag):
+                            continue
+                        # keep a segment's neighbours so solid and dashed parts join
+                        keep = (stable == flag) | np.r_[stable[1:] == flag, False] | \
+                            np.r_[False, stable[:-1] == flag]
+                        yy = np.where(keep, y, np.nan)
+                        ax.plot(f, yy, style, lw=1.2, color=color,
+                                label=tag and tag + labels[0] + {1: "", 0: " (unstable)",
+                                                                 -1: " (stability unknown)"}[flag])
+                else:
+                    ok = np.asarray(ds["converged"])
+                    ax.plot(f[ok], y[ok], "o", mfc="none", ms=6, mew=1.2, color=color,
+                            label=tag and tag + labels[2])
+                    if np.any(~ok):
+                        ax.plot(f[~ok], y[~ok], "x", ms=6, color=color,
+                                label=tag and tag + labels[2] + " (not settled)")
+        ax.set_title(f"stage {stage} meshes", fontsize=9)
+        ax.set_ylabel(ylabel, fontsize=8)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=2)
+    ref_stage = first.attrs.get("reference_stage", "")
+    axes[-1, 0].set_xlabel(f"stage {ref_stage} mesh frequency (kHz)")
+    if xlim is None:
+        src = [sweep] if sweep is not None else [d for d in (reference, points) if d is not None]
+        f_all = np.concatenate([np.asarray(d["mesh_frequency_hz"]) for d in src]) / 1e3
+        xlim = (float(f_all.min()), float(f_all.max()))
+        if xlim[0] == xlim[1]:
+            xlim = (xlim[0] - 0.1, xlim[1] + 0.1)
+    axes[0, 0].set_xlim(*xlim)
+    for ax, data in zip(axes[:, 0], shown):
+        _fit_y(ax, xlim)
+        if data:  # unstable branches far above the rest (parametric instability): off scale
+            f = np.concatenate([d[0] for d in data])
+            y = np.concatenate([d[1] for d in data])
+            ok = np.concatenate([d[2] for d in data])
+            inside = (f >= xlim[0]) & (f <= xlim[1])
+            clip_to_stable(ax, y[inside], y[inside & ok], corner="left")  # legend: right
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def _fit_y(ax, xlim) -> None:
+    """Y limits from the data drawn inside ``xlim`` (a reference sweep may span more)."""
+    ys = []
+    for line in ax.get_lines():
+        x, y = (np.asarray(v, dtype=float) for v in line.get_data())
+        inside = (x >= xlim[0]) & (x <= xlim[1]) & np.isfinite(y)
+        ys.append(y[inside])
+    y = np.concatenate(ys) if ys else np.empty(0)
+    if y.size:
+        lo, hi = min(0.0, float(y.min())), max(0.0, float(y.max()))
+        pad = 0.06 * (hi - lo) or 1.0
+        ax.set_ylim(lo - (pad if lo < 0 else 0.0), hi + pad)
+
+
+# ------------------------------------------------------------------ separation
+
+
+@dataclasses.dataclass(frozen=True)
+class SeparationBranch:
+    """A run of consecutive sweep points whose frequency moves one way.
+
+    **Fields:** ``points``: their indices in the Dataset; ``frequency_hz`` ``(P,)``
+    (reference stage, ascending or descending as swept); ``separation`` ``(P, m)``:
+    share of the period with the teeth apart, per mesh; ``stable`` ``(P,)`` int8 (1, 0,
+    -1 unknown); ``meshes``: mesh names.
+    """
+
+    points: np.ndarray
+    frequency_hz: np.ndarray
+    separation: np.ndarray
+    stable: np.ndarray
+    meshes: tuple[str, ...]
+
+
+def separation_branches(ds) -> list[SeparationBranch]:
+    """Split a sweep Dataset into branches between folds (where the frequency turns),
+    so each can be drawn against frequency; a sweep without folds is one branch.
+
+    Points where the frequency turns belong to both neighbouring branches.
+    """
+    f = np.asarray(ds["mesh_frequency_hz"], dtype=float)
+    sep = np.asarray(ds["separation"], dtype=float)
+    stable = np.asarray(ds["stable"]) if "stable" in ds else np.full(f.shape, -1, np.int8)
+    meshes = tuple(str(m) for m in np.asarray(ds["mesh"]).tolist())
+    d = np.sign(np.diff(f))
+    cuts = [0]
+    for i in range(1, d.size):
+        if d[i] != 0 and d[i - 1] != 0 and d[i] != d[i - 1]:
+            cuts.append(i)
+    cuts.append(f.size - 1)
+    out = []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        idx = np.arange(a, b + 1)
+        out.append(SeparationBranch(points=idx, frequency_hz=f[idx], separation=sep[idx],
+                                    stable=stable[idx], meshes=meshes))
+    return out
+
+
+def separation_figure(ds, title: str = ""):
+    """Tooth-separation map of a sweep: share of the period each mesh (rows) spends
+    with its teeth apart, against reference-stage mesh frequency, one panel per branch
+    between folds (:func:`separation_branches`); unstable points hatched. **Returns:**
+    the Figure."""
+    from matplotlib.colors import Normalize
+
+    branches = separation_branches(ds)
+    vmax = max(0.05, float(np.nanmax(np.asarray(ds["separation"]))))
+    norm = Normalize(0.0, vmax)
+    fig, axes = _figure(10.0, 0.6 + 2.6 * len(branches), len(branches), 1)
+    mesh_img = None
+    for ax, br in zip(axes[:, 0], branches):
+        order = np.argsort(br.frequency_hz)
+        f = br.frequency_hz[order] / 1e3
+        edges = _edges(f)
+        mesh_img = ax.pcolormesh(edges, np.arange(len(br.meshes) + 1) - 0.5,
+                                 br.separation[order].T, norm=norm, cmap="magma_r",
+                                 shading="flat")
+        for k in np.where(br.stable[order] == 0)[0]:
+            ax.axvspan(edges[k], edges[k + 1], facecolor="none", edgecolor="0.3",
+                       hatch="///", lw=0)
+        ax.set_yticks(range(len(br.meshes)))
+        ax.set_yticklabels(br.meshes, fontsize=6)
+        ax.invert_yaxis()
+        way = "up" if br.frequency_hz[-1] >= br.frequency_hz[0] else "down"
+        unstable = int(np.sum(br.stable == 0))
+        ax.set_title(f"branch {br.frequency_hz[0]:.0f} -> {br.frequency_hz[-1]:.0f} Hz "
+                     f"(continuation going {way}; {len(br.points)} points, "
+                     f"{unstable} unstable, hatched)", fontsize=8)
+        ax.set_ylabel("mesh", fontsize=8)
+    axes[-1, 0].set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
+    fig.colorbar(mesh_img, ax=list(axes[:, 0]), label="share of period in separation",
+                 shrink=0.9)
+    fig.suptitle(title or "tooth separation per mesh", fontsize=10)
+    return fig
+
+
+def _edges(x: np.ndarray) -> np.ndarray:
+    """Cell edges around sorted centres ``x`` (half-way between neighbours)."""
+    if x.size == 1:
+        return np.array([x[0] - 0.01, x[0] + 0.01])
+    mid = 0.5 * (x[1:] + x[:-1])
+    return np.concatenate([[x[0] - (mid[0] - x[0])], mid, [x[-1] + (x[-1] - mid[-1])]])
+
+
+# ------------------------------------------------------------------ designs
+
+
+def design_figure(result, path: str | int = 0, title: str = ""):
+    """A batched design sweep (:class:`~gearjax.DesignSweep`): the peak RMS mesh force
+    over the band against the value of one varied ``path`` (name or index; the other
+    values as they are), and the largest RMS over the meshes against reference-stage mesh
+    frequency for the best and the worst design. **Returns:** the Figure."""
+    k = result.paths.index(path) if isinstance(path, str) else int(path)
+    x = np.asarray(result.thetas)[:, k]
+    peak = np.asarray(result.peak, dtype=float)
+    fig, axes = _figure(10.0, 3.4, 1, 2)
+    ax = axes[0, 0]
+    order = np.argsort(x)
+    ax.plot(x[order], peak[order], "o-", ms=3, lw=1.0, color="k")
+    best, worst = int(np.nanargmin(peak)), int(np.nanargmax(peak))
+    for i, color, name in ((best, "C3", "best"), (worst, "C0", "worst")):
+        ax.plot([x[i]], [peak[i]], "o", ms=7, color=color, label=f"{name}: {peak[i]:.0f} N")
+    ax.set_xlabel(result.paths[k])
+    ax.set_ylabel("peak RMS mesh force over the band (N)", fontsize=8)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    ax = axes[0, 1]
+    f = np.asarray(result.frequencies_hz) / 1e3
+    for i, color, name in ((worst, "C0", "worst"), (best, "C3", "best")):
+        per_f = np.nanmax(np.asarray(result.rms_force)[i], axis=-1)
+        ax.plot(f, per_f, ".-", ms=3, lw=1.0, color=color,
+                label=f"{name}, {result.paths[k]} = {x[i]:.4g}")
+    ax.set_yscale("log")
+    ax.set_xlabel(f"stage {result.reference_stage} mesh frequency (kHz)")
+    ax.set_ylabel("largest RMS mesh force (N)", fontsize=8)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    model = "linear time-varying" if result.linear else "with backlash"
+    fig.suptitle(title or f"{len(x)} designs in one batched call ({model}, K = "
+                 f"{result.harmonics}, {f.size} frequencies)", fontsize=10)
+    return fig
+
+
+def recheck_figure(recheck, title: str = ""):
+    """The re-check of an optimisation (:class:`gearjax._studies.optimize.Recheck`): per stage,
+    the largest RMS force of its meshes along the fresh sweeps with backlash of the
+    baseline (black) and the optimum (red), stable solid (and dots: a stable point
+    between unstable ones shows too) and unstable dotted (off-scale
+    unstable branches clipped at 1.5 times the largest stable value); stars: time
+    integration from each sweep's peak orbit; circles: the integrations of the
+    verification points. **Returns:** the Figure."""
+    colors = {"baseline": "k", "optimum": "C3"}
+    first = next(iter(recheck.sweeps.values())).dataset
+    stages = list(dict.fromkeys(np.asarray(first["stage"]).tolist()))
+    fig, axes = _figure(10.0, 3.0 * len(stages), len(stages), 1, sharex=True)
+    for ax, stage in zip(axes[:, 0], stages):
+        top = 0.0
+        for name, sw in recheck.sweeps.items():
+            ds, color = sw.dataset, colors.get(name, "C2")
+            cols = np.asarray(ds["stage"]) == stage
+            f = np.asarray(ds["mesh_frequency_hz"]) / 1e3
+            y = np.nanmax(np.asarray(ds["rms_force"])[:, cols], axis=1)
+            stable = np.asarray(ds["stable"]) == 1
+            branch = np.asarray(ds["branch"]) if "branch" in ds else np.zeros(f.size, int)
+            for b in np.unique(branch):
+                sel = branch == b
+                ys, st = y[sel], stable[sel]
+                on = st | np.r_[st[1:], False]  # each stable run reaches the next point
+                ax.plot(f[sel], np.where(on, ys, np.nan), "-", lw=1.1, color=color,
+                        label=f"{name}, sweep with backlash" if b == branch[0] else None)
+                ax.plot(f[sel][st], ys[st], ".", ms=2.5, color=color)  # lone stable points
+                ax.plot(f[sel], np.where(~st, ys, np.nan), ":", lw=0.8, color=color,
+                        alpha=0.7, label=f"{name}, unstable" if b == branch[0]
+                        and not np.all(stable) else None)
+            if np.any(stable):
+                top = max(top, float(np.nanmax(y[stable])))
+            if name in recheck.orbits:
+                ni = recheck.orbits[name]
+                yi = np.nanmax(np.asarray(ni["rms_force"])[:, cols], axis=1)
+                ax.plot(np.asarray(ni["mesh_frequency_hz"]) / 1e3, yi, "*", ms=11,
+                        mfc="none", mew=1.3, color=color,
+                        label=f"{name}, integrated from the peak orbit")
+            if name in recheck.verify:
+                ni = recheck.verify[name].ni
+                yi = np.nanmax(np.asarray(ni["rms_force"])[:, cols], axis=1)
+                ax.plot(np.asarray(ni["mesh_frequency_hz"]) / 1e3, yi, "o", ms=7,
+                        mfc="none", mew=1.2, color=color,
+                        label=f"{name}, verify_gear integration")
+        if top > 0:
+            ax.set_ylim(0.0, 1.5 * top)
+        ax.set_title(f"stage {stage} meshes: largest RMS force", fontsize=9)
+        ax.set_ylabel("RMS mesh force (N)", fontsize=8)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, ncol=2)
+    axes[-1, 0].set_xlabel(f"stage {first.attrs.get('reference_stage', '')} mesh frequency "
+                           "(kHz)")
+    fig.suptitle(title or f"re-check {recheck.band_hz[0]:g}-{recheck.band_hz[1]:g} Hz: fresh "
+                 "sweeps with backlash and time integration", fontsize=10)
+    return fig

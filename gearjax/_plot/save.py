@@ -1,0 +1,338 @@
+"""Figures: mode shapes, sweeps, solution points, verification; and redrawing a saved
+results file (:func:`plot_results`, ``gearjax plot``). Matplotlib, no screen needed."""
+
+from __future__ import annotations
+
+import json
+import math
+import pathlib
+import tomllib
+from collections.abc import Callable
+
+import numpy as np
+
+from .._errors import TrainError, bad_argument
+from .._io.verify_file import load_verify
+from .._engine.modal import ModalResult
+
+WHAT = {"rms": ("rms_force", "RMS mesh force (N)"), "dlf": ("dlf", "dynamic load factor"),
+        "separation": ("separation", "share of period in separation"),
+        "torque": ("mean_torque", "mean transmitted torque (N m)")}
+"""``what`` of the response plots: the Dataset variable and its axis label."""
+
+
+def plot_mode_shapes(result: ModalResult, path: str, title: str = "", classes=("elastic",)):
+    """Bar chart of each distinct mode's shape (one panel per frequency), saved to ``path``.
+
+    Repeated modes get one panel (the solver's first basis vector) marked ``xN``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    chosen, k = [], 0
+    modes = [m for m in result.modes if m.cls in classes]
+    while k < len(modes):
+        chosen.append(modes[k])
+        k += modes[k].multiplicity
+    cols = min(4, max(1, len(chosen)))
+    rows = math.ceil(len(chosen) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 2.8 * rows), squeeze=False,
+                             sharey=True)
+    for ax, m in zip(axes.flat, chosen):
+        labels = list(m.shape)
+        values = np.array([m.shape[l] for l in labels])
+        colors = ["tab:blue" if ".planet" not in l else "tab:orange" for l in labels]
+        ax.bar(range(len(labels)), values, color=colors)
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_xticks(range(len(labels)))
+        ax.set_xticklabels(labels, rotation=90, fontsize=6)
+        tag = f" x{m.multiplicity}" if m.multiplicity > 1 else ""
+        fam = f"planet {m.stage}" if m.family == "planet" else m.family
+        ax.set_title(f"{m.hz / 1e3:.3f} kHz{tag} ({fam})", fontsize=8)
+    for ax in list(axes.flat)[len(chosen):]:
+        ax.set_visible(False)
+    fig.suptitle(title or "mode shapes (largest coordinate = 1)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_sweep(ds, path: str, what: str = "rms", title: str = ""):
+    """Response of every stage's meshes against reference-stage mesh frequency.
+
+    ``what``: ``rms`` (RMS alternating force, N), ``dlf``, ``separation`` (share of the
+    period) or ``torque`` (mean transmitted torque, N m). One panel per stage and mesh
+    side, the planets' curves overlaid; stable solid, unstable dashed, unknown dotted.
+    """
+    var, label = WHAT[what]
+    f = np.asarray(ds["mesh_frequency_hz"]) / 1e3
+    stable = np.asarray(ds["stable"]) if "stable" in ds else np.full(f.shape, -1)
+    branch = np.asarray(ds["branch"]) if "branch" in ds else np.zeros(f.shape, int)
+    fig, axes, panels = _mesh_panels(ds, label)
+    for ax, first, meshes in panels:
+        for j in meshes:
+            y = np.asarray(ds[var])[:, j]
+            planet = int(ds["planet"][j])
+            for b in np.unique(branch):  # branches are not joined to each other
+                sel = branch == b
+                for flag, style in ((1, "-"), (0, "--"), (-1, ":")):
+                    on = stable[sel] == flag
+                    on[1:] |= stable[sel][:-1] == flag  # each run reaches the next point
+                    ax.plot(f[sel], np.where(on, y[sel], np.nan), style, lw=1.0,
+                            color=f"C{(planet - 1) % 10}",  # one colour per planet
+                            label=(f"planet {planet}" if flag == 1 and first and b == branch[0]
+                                   else None))
+        values = np.asarray(ds[var])[:, meshes]
+        clip_to_stable(ax, values, values[stable == 1])
+    _finish(fig, axes, ds, path, title or "frequency response (solid stable, dashed unstable)")
+
+
+def clip_to_stable(ax, values, stable_values, factor: float = 1.5, corner: str = "right"
+                    ) -> None:
+    """Keep the stable response readable: where unstable branches reach more than
+    ``factor`` times the largest stable value (inside a parametric instability the
+    periodic orbits of the paper case reach meganewtons, all unstable), the y-axis stops
+    at ``factor`` times it and a note in the upper ``corner`` (``"left"`` or ``"right"``,
+    the one without a legend) gives how far the unstable branches go."""
+    top = np.nanmax(stable_values) if np.any(np.isfinite(stable_values)) else np.nan
+    high = np.nanmax(values) if np.any(np.isfinite(values)) else np.nan
+    if not (np.isfinite(top) and top > 0 and high > factor * top):
+        return
+    low = min(0.0, float(np.nanmin(values)))
+    ax.set_ylim(low, factor * top)
+    x = 0.01 if corner == "left" else 0.99
+    ax.text(x, 0.97, f"unstable branches up to {high:.3g}, off scale", fontsize=7,
+            ha=corner, va="top", transform=ax.transAxes, color="0.3")
+
+
+def _mesh_panels(ds, ylabel: str):
+    """A figure with one panel per stage (rows) and mesh side (sun, ring: columns).
+
+    **Returns:** ``(fig, axes, panels)``, ``panels`` a list of ``(ax, first, meshes)``:
+    the panel, whether it is the first (it carries the legend) and the indices of its
+    meshes in ``ds``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    stages = list(dict.fromkeys(np.asarray(ds["stage"]).tolist()))
+    fig, axes = plt.subplots(len(stages), 2, figsize=(10, 3.2 * len(stages)), squeeze=False,
+                             sharex=True)
+    panels = []
+    for r, stage in enumerate(stages):
+        for c, side in enumerate(("sun", "ring")):
+            ax = axes[r, c]
+            sel = (np.asarray(ds["stage"]) == stage) & (np.asarray(ds["side"]) == side)
+            ax.set_title(f"stage {stage}, {side}-planet meshes", fontsize=9)
+            ax.set_ylabel(ylabel, fontsize=8)
+            ax.ticklabel_format(axis="y", useOffset=False)
+            ax.grid(alpha=0.3)
+            panels.append((ax, r == 0 and c == 0, np.where(sel)[0]))
+    return fig, axes, panels
+
+
+def _finish(fig, axes, ds, path, title: str) -> None:
+    """Frequency labels, legend and title; save to ``path`` and close."""
+    import matplotlib.pyplot as plt
+
+    for ax in axes[-1]:
+        ax.set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_verify(hb, ni, path: str, curve=None, title: str = "", what: str = "rms"):
+    """Integration points (markers) over the harmonic-balance RMS mesh forces, as the
+    paper's Figs 4 and 5.
+
+    ``hb``, ``ni``: results Datasets at the same points (``VerifyResult.hb``, ``.ni``);
+    ``curve``: an optional sweep Dataset drawn as the harmonic-balance line (otherwise
+    the line joins the ``hb`` points in frequency order); ``what`` as
+    :func:`plot_sweep`. See :func:`plot_points`.
+    """
+    plot_points(ni, path, line=curve if curve is not None else hb, what=what,
+                title=title or "harmonic balance (lines) and time integration (markers)")
+
+
+def plot_points(ds, path: str, line=None, title: str = "", what: str = "rms"):
+    """A response of solution points as markers against reference-stage mesh
+    frequency, optionally over the lines of another results Dataset ``line``.
+
+    ``what`` as :func:`plot_sweep` (default RMS mesh force). One panel per stage and
+    mesh side, one colour per planet; open circles are converged points, crosses
+    points that did not converge (e.g. an integration that did not settle to the base
+    period). Meshes are matched by name.
+    """
+    var, ylabel = WHAT[what]
+    f_pts = np.asarray(ds["mesh_frequency_hz"]) / 1e3
+    settled = np.asarray(ds["converged"])
+    names = np.asarray(ds["mesh"]).tolist()
+    fig, axes, panels = _mesh_panels(ds, ylabel)
+    for ax, first, meshes in panels:
+        for j in meshes:
+            color = f"C{(int(ds['planet'][j]) - 1) % 10}"  # one colour per planet
+            label = f"planet {int(ds['planet'][j])}" if first else None
+            if line is not None:
+                f_line = np.asarray(line["mesh_frequency_hz"]) / 1e3
+                order = np.argsort(f_line)
+                k = np.asarray(line["mesh"]).tolist().index(names[j])
+                ax.plot(f_line[order], np.asarray(line[var])[order, k], "-", lw=1.0,
+                        color=color, label=label)
+                label = None
+            y = np.asarray(ds[var])[:, j]
+            ax.plot(f_pts[settled], y[settled], "o", mfc="none", ms=6, color=color, label=label)
+            ax.plot(f_pts[~settled], y[~settled], "x", ms=6, color=color)
+    _finish(fig, axes, ds, path,
+            title or f"{ylabel} (open circles converged, crosses not)")
+
+
+# ------------------------------------------------------------------ saved results
+
+
+def plot_results(results, out=None, what: str = "rms") -> tuple[str, pathlib.Path]:
+    """Redraw a results file (NetCDF, :func:`gearjax._io.results.save_results`) without
+    recomputing.
+
+    The figure depends on the kind of result, the file's ``kind`` attribute (files
+    without one: ``simulate`` when they hold integration statistics, else ``sweep``):
+    :data:`RESULT_PLOTS` maps each kind to its drawing function (new kinds register
+    there). ``what``: ``rms``, ``dlf``, ``separation`` or ``torque`` (:func:`plot_sweep`);
+    ``out``: the figure (default: ``results`` with the suffix ``.png``).
+
+    **Returns:** ``(kind, figure path)``. **Raises:** ``TrainError`` (one line naming the
+    file) for a missing, unreadable or non-gearjax file, or a kind with no figure.
+    """
+    path = pathlib.Path(results)
+    if what not in WHAT:
+        raise bad_argument("what", what, f"must be one of {', '.join(WHAT)}")
+    ds = _open_results(path)
+    kind = result_kind(ds)
+    if kind not in RESULT_PLOTS:
+        raise TrainError(f"{path}: kind = {kind!r}: gearjax plot cannot draw this kind of "
+                         f"result; it draws {', '.join(RESULT_PLOTS)}")
+    fig = pathlib.Path(out) if out else path.with_suffix(".png")
+    if fig.resolve() == path.resolve():
+        raise bad_argument("out", str(fig), "would overwrite the results file")
+    RESULT_PLOTS[kind](path, ds, fig, what)
+    return kind, fig
+
+
+def result_kind(ds) -> str | None:
+    """The kind of a results Dataset: its ``kind`` attribute, or for files written
+    before it existed ``simulate`` (integration statistics present) or ``sweep``."""
+    kind = ds.attrs.get("kind")
+    if kind is None and "mesh_frequency_hz" in ds:
+        kind = "simulate" if "num_steps" in ds else "sweep"
+    return None if kind is None else str(kind)
+
+
+def _open_results(path: pathlib.Path):
+    import xarray as xr
+
+    if not path.is_file():
+        raise TrainError(f"{path}: no such results file")
+    if path.suffix.lower() != ".nc":
+        raise TrainError(f"{path}: only NetCDF results (.nc) can be redrawn; write them as "
+                         "NetCDF (FILE.nc)")
+    try:
+        ds = xr.load_dataset(path, engine="h5netcdf")
+    except Exception as e:  # noqa: BLE001  h5py, netCDF and xarray raise many kinds
+        reason = " ".join(str(e).split()) or type(e).__name__
+        raise TrainError(f"{path}: not a NetCDF results file ({reason[:120]})") from None
+    if "gearjax_version" not in ds.attrs:
+        raise TrainError(f"{path}: not a gearjax results file (no gearjax_version attribute)")
+    return ds
+
+
+def _title(ds, what: str, kind: str) -> str:
+    try:
+        name = tomllib.loads(ds.attrs.get("train_toml", "")).get("name", "")
+    except tomllib.TOMLDecodeError:
+        name = ""
+    try:
+        linear = json.loads(ds.attrs.get("solver", "{}")).get("linear")
+    except ValueError:
+        linear = None
+    model = {True: ", linear", False: ", backlash"}.get(linear, "")
+    head = f"{name}\n" if name else ""
+    return f"{head}gear {ds.attrs.get('gear', '?')}{model}, {kind}: {WHAT[what][1]}"
+
+
+def _redraw_sweep(path, ds, fig, what):
+    plot_sweep(ds, fig, what=what,
+               title=_title(ds, what, "sweep") + " (solid stable, dashed unstable)")
+
+
+def _redraw_simulate(path, ds, fig, what):
+    plot_points(ds, fig, what=what, title=_title(ds, what, "time integration")
+                + " (circles converged, crosses not)")
+
+
+def _redraw_verify(path, ds, fig, what):
+    _, hb, ni = load_verify(path)
+    plot_verify(hb, ni, fig, what=what, title=_title(hb, what, "verification")
+                + "\nlines: harmonic balance, markers: time integration")
+
+
+def plot_optimize(ds, path: str, title: str = ""):
+    """A phasing optimisation (``optimize_dataset``): per stage, the largest RMS force of
+    its meshes against reference-stage mesh frequency for the baseline, the optimum and
+    the continuous relaxation (lines, linear time-varying harmonic balance on the common
+    grid) and, where they were swept, the stable points with backlash (markers)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    stages = list(dict.fromkeys(np.asarray(ds["stage"]).tolist()))
+    fig, axes = plt.subplots(len(stages), 1, figsize=(9, 3.0 * len(stages)), squeeze=False,
+                             sharex=True)
+    f = np.asarray(ds["frequency"]) / 1e3
+    order = np.argsort(f)
+    styles = {"baseline": ("k", "-"), "optimum": ("C3", "-"), "relaxed": ("C0", ":")}
+    for ax, stage in zip(axes[:, 0], stages):
+        cols = np.asarray(ds["stage"]) == stage
+        for d, design in enumerate(np.asarray(ds["design"]).tolist()):
+            color, ls = styles.get(design, ("C2", "--"))
+            peak = np.nanmax(np.asarray(ds["linear_rms"])[d][:, cols], axis=1)
+            ax.plot(f[order], peak[order], ls, color=color, lw=1.0,
+                    label=f"{design} (linear)" if design != "relaxed"
+                    else "relaxed (linear, cannot be assembled)")
+        for design in ("baseline", "optimum"):
+            if f"{design}_nonlinear_rms" in ds:
+                color = styles[design][0]
+                y = np.nanmax(np.asarray(ds[f"{design}_nonlinear_rms"])[:, cols], axis=1)
+                ax.plot(np.asarray(ds[f"{design}_nonlinear_frequency_hz"]) / 1e3, y, ".",
+                        ms=2.5, color=color, alpha=0.6, label=f"{design} (backlash, stable)")
+        ax.set_yscale("log")
+        ax.set_ylabel("largest RMS mesh force (N)", fontsize=8)
+        ax.set_title(f"stage {stage} meshes", fontsize=9)
+        ax.grid(alpha=0.3, which="both")
+    axes[0, 0].legend(fontsize=7)
+    axes[-1, 0].set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
+    fig.suptitle(title or "phasing optimisation: baseline and optimum", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _redraw_optimize(path, ds, fig, what):
+    peaks = (f"peak {ds.attrs.get('baseline_peak_linear', math.nan):.0f} N -> "
+             f"{ds.attrs.get('optimum_peak_linear', math.nan):.0f} N (linear)")
+    plot_optimize(ds, fig, title=_title(ds, "rms", "optimisation") + f"\n{peaks}")
+
+
+RESULT_PLOTS: dict[str, Callable] = {
+    "sweep": _redraw_sweep,
+    "simulate": _redraw_simulate,
+    "verify": _redraw_verify,
+    "optimize": _redraw_optimize,
+}
+"""Drawing function per result kind: ``f(results_path, dataset, figure_path, what)``."""

@@ -1,0 +1,248 @@
+"""How many harmonics a periodic harmonic balance of a ``System`` needs, and whether it fits.
+
+Three rules, each derived from the system, none a constant fitted on one train:
+
+1. **Floor** (:func:`excitation_floor`): the solution holds at least the highest
+   excitation order (stiffness, transmission error and torque-ripple harmonics of the
+   base, times ``eta``). Fewer harmonics cannot hold the excitation itself: such a
+   discretisation is refused, never used.
+2. **First choice** (:func:`harmonics_rule`): enough harmonics of the response's base
+   frequency to reach :func:`response_cutoff_hz`, ``CUTOFF_MARGIN`` times the highest
+   elastic mode whose strain energy sits mostly in the meshes (the modes the mesh
+   excitation drives; contact loss adds content above them), in steps of 16 (a sweep
+   compiles once per step), for the first choice at most ``MAX_INITIAL`` per response
+   period or twice the floor (a cost bound; never below the floor).
+3. **A posteriori** (:func:`truncation_change`): the same point solved with twice the
+   harmonics; the largest relative change of a mesh's RMS alternating force is the
+   truncation estimate, checked against ``TRUNCATION_TARGET``. A sweep raises K where
+   it is exceeded.
+
+And a size rule (:func:`require_size`): the dense factorisation of the condensed
+bordered Jacobian, ``(2K+1) r + 1`` unknowns (``r`` the rank of the mesh projection),
+dominates memory and time. A problem whose estimated memory exceeds ``MEMORY_SHARE``
+of the memory available is refused with the numbers, before any work.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.linalg
+
+from .._engine import hb as _hb
+from .._errors import bad_argument
+from .._engine.modal import mode_classes
+from .._engine.newton import newton_jit
+from .._engine.responses import mesh_responses
+from .._engine.system import System
+
+TRUNCATION_TARGET = 5e-3
+"""Largest accepted relative change of a mesh's RMS alternating force when K doubles."""
+
+CUTOFF_MARGIN = 5.0 / 3.0
+"""Response content the first choice of K reaches, relative to the highest mesh mode:
+tooth separation adds harmonics above the modes it excites. Only a first guess: the
+truncation check decides."""
+
+MAX_INITIAL = 64
+"""Cap on the first choice of K per response period, unless twice the floor is more (a
+cost bound); the truncation check raises K beyond it where the estimate asks for more."""
+
+MEMORY_SHARE = 0.5
+"""Share of the available memory one factorisation may take."""
+
+RMS_FLOOR = 1e-3
+"""Meshes whose RMS alternating force is below this share of the largest one are judged
+against that share (a relative change of a negligible force is noise)."""
+
+
+def excitation_floor(system: System, eta: int = 1) -> int:
+    """The fewest solution harmonics that hold the excitation: its highest order (>= 1)."""
+    return max(_hb.highest_excitation(system, eta), 1)
+
+
+def response_cutoff_hz(system: System) -> float:
+    """``CUTOFF_MARGIN`` times the highest elastic natural frequency (Hz) whose strain
+    energy is mostly (> 1/2) in the meshes; the highest elastic one where none is; 0
+    where the system has no elastic mode."""
+    lam, _, shares, rigid, penalty = mode_classes(system)
+    hz = np.sqrt(np.maximum(np.asarray(lam), 0.0)) / (2 * math.pi)
+    elastic = ~np.asarray(rigid) & ~np.asarray(penalty)
+    mesh = elastic & (np.asarray(shares["mesh"]) > 0.5)
+    pick = mesh if mesh.any() else elastic
+    return CUTOFF_MARGIN * float(hz[pick].max()) if pick.any() else 0.0
+
+
+def harmonics_rule(base_hz: float, min_harmonics: int, eta: int = 1, *,
+                   cutoff_hz: float) -> int:
+    """First choice of K at response base frequency ``base_hz`` (Hz, ``Omega / (2 pi
+    eta)``): ``ceil16(cutoff_hz / base_hz)``, at most ``MAX_INITIAL * eta`` or twice the
+    floor ``min_harmonics`` (:func:`excitation_floor`) where that is more, at least 16,
+    never below the floor."""
+    k = 16 * math.ceil(cutoff_hz / max(base_hz, 1e-9) / 16)
+    cap = max(MAX_INITIAL * eta, 2 * min_harmonics)
+    return int(max(min(max(k, 16), cap), min_harmonics))
+
+
+def require_harmonics(system: System, K: int, eta: int = 1, *,
+                      argument: str = "harmonics") -> None:
+    """Refuse ``K`` below the excitation floor.
+
+    **Raises:** ``ArgumentError`` (a ``TrainError``) naming ``argument``, the caller's
+    name for ``K``."""
+    floor = excitation_floor(system, eta)
+    if int(K) != K or K < floor:
+        raise bad_argument(argument, K, f"the solution needs at least {floor} harmonics: "
+                           f"{floor_reason(system, eta)}; fewer cannot hold the excitation")
+
+
+def floor_reason(system: System, eta: int = 1) -> str:
+    """Where the floor comes from, in words (``H x max(mu)``, ripple orders, eta)."""
+    H = max(system.k_cos.shape[-1], system.te_cos.shape[-1])
+    mu = max(system.mesh_mu, default=0)
+    text = f"stiffness harmonics H = {H} x mesh order max(mu) = {mu}"
+    if system.forcing_mu:
+        text += f", torque-ripple orders up to {max(system.forcing_mu)}"
+    return text + (f", times eta = {eta}" if eta != 1 else "")
+
+
+# ----------------------------------------------------------------------------- size
+
+
+def factor_unknowns(system: System, K: int) -> int:
+    """Unknowns of the bordered factorisation, ``(2K+1) r + 1``: ``r`` the motions that
+    deflect a mesh where the solves condense the others out (``_hb.mesh_null_space``),
+    else every degree of freedom."""
+    null = _hb.mesh_null_space(system.W)
+    r = system.n_dof - (0 if null is None else null.shape[1])
+    return (2 * K + 1) * r + 1
+
+
+def memory_bytes(system: System, K: int) -> int:
+    """Estimated peak memory (bytes) of one Newton or continuation step at ``K``: the
+    condensed matrix, its LU and the products that assemble it (about four copies of
+    ``N^2`` doubles), and the per-mesh Jacobian blocks with their projections
+    (``m (2K+1)^2 (r + 2)`` doubles)."""
+    N = factor_unknowns(system, K)
+    C = 2 * K + 1
+    r = (N - 1) // C
+    return 8 * (4 * N * N + system.n_meshes * C * C * (r + 2))
+
+
+def available_memory() -> int:
+    """Bytes of memory available to a solve: the accelerator's free memory, else the
+    host's available memory (``MemAvailable``), else its physical memory."""
+    dev = jax.devices()[0]
+    if dev.platform != "cpu":
+        stats = dev.memory_stats() or {}
+        if "bytes_limit" in stats:
+            return int(stats["bytes_limit"] - stats.get("bytes_in_use", 0))
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+@functools.cache
+def _lu_rate() -> float:
+    """Floating-point operations per second of a dense LU on this machine (LAPACK through
+    SciPy, 1024 unknowns, best of three)."""
+    n = 1024
+    a = np.random.default_rng(0).standard_normal((n, n)) + n * np.eye(n)
+    best = math.inf
+    for _ in range(3):
+        t = time.perf_counter()
+        scipy.linalg.lu_factor(a)
+        best = min(best, time.perf_counter() - t)
+    return (2 / 3) * n**3 / max(best, 1e-6)
+
+
+def factor_seconds(system: System, K: int) -> float:
+    """Estimated seconds of one dense factorisation at ``K`` on this machine."""
+    return (2 / 3) * factor_unknowns(system, K) ** 3 / _lu_rate()
+
+
+def require_size(system: System, K: int, *, argument: str = "harmonics", mu=None) -> None:
+    """Refuse ``K`` where one factorisation would not fit in ``MEMORY_SHARE`` of the
+    available memory.
+
+    **Raises:** ``ArgumentError`` (a ``TrainError``) naming ``argument`` (the caller's
+    name for ``K``), ``mu``, K, the unknowns, the memory and a time estimate."""
+    need, avail = memory_bytes(system, K), available_memory()
+    if need <= MEMORY_SHARE * avail:
+        return
+    N = factor_unknowns(system, K)
+    mu_text = f"mu = {list(mu)}: " if mu is not None else ""
+    raise bad_argument(argument, K, f"{mu_text}{K} harmonics make a factorisation of {N} "
+                       f"unknowns, about {_size(need)} of the {_size(avail)} available "
+                       f"(at most {MEMORY_SHARE:.0%}) and about "
+                       f"{factor_seconds(system, K):.0f} s each: too large for the periodic "
+                       "harmonic balance; reduce stiffness_harmonics or the "
+                       "transmission-error harmonics, or integrate in time (gearjax "
+                       "simulate)")
+
+
+def _size(n_bytes: float) -> str:
+    return f"{n_bytes / 1e9:.1f} GB" if n_bytes >= 1e9 else f"{n_bytes / 1e6:.0f} MB"
+
+
+# ----------------------------------------------------------------------- a posteriori
+
+
+MAX_CHECK_UNKNOWNS = 16384
+"""Largest factorisation (unknowns) the truncation check may solve at 2K: a dense LU of
+2.9e12 floating-point operations and 2 GB a copy. Beyond it (or beyond the memory
+share) the check is skipped and the result says so. A size, not a timing: the decision
+is the same on every run."""
+
+
+def check_affordable(system: System, K: int) -> str | None:
+    """``None`` where the truncation check of a point at ``K`` (a solve at ``2 K``) fits
+    ``MAX_CHECK_UNKNOWNS`` and the memory share; else why not, in words."""
+    K2 = 2 * K
+    N = factor_unknowns(system, K2)
+    if N > MAX_CHECK_UNKNOWNS:
+        return (f"a check at K = {K2} would factorise {N} unknowns, more than "
+                f"{MAX_CHECK_UNKNOWNS}")
+    need, avail = memory_bytes(system, K2), available_memory()
+    if need > MEMORY_SHARE * avail:
+        return (f"a check at K = {K2} would need about {_size(need)} of the "
+                f"{_size(avail)} available")
+    return None
+
+
+def truncation_change(problem: _hb.HBProblem, wide: _hb.HBProblem, y, omega,
+                      F_static) -> float:
+    """The truncation estimate of a converged point: the largest relative change of a
+    mesh's RMS alternating force when the point ``y`` (scaled unknowns of ``problem``)
+    at base frequency ``omega`` (rad/s) is solved again with ``wide``, the same problem
+    with twice the harmonics (Newton from ``y`` padded with zeros). Meshes below
+    ``RMS_FLOOR`` of the largest RMS are judged against that share.
+
+    **Returns:** the change; ``inf`` where the doubled solve does not converge.
+    """
+    C, n = problem.shape
+    y2 = np.zeros(wide.shape)
+    y2[:C] = np.asarray(y).reshape(C, n)
+    sol = newton_jit(wide, jnp.asarray(omega, float), jnp.asarray(y2.reshape(-1)))
+    if int(sol.result) != _hb.CONVERGED:
+        return math.inf
+    X = jnp.asarray(np.asarray(y).reshape(C, n)) * problem.x_scale
+    a = np.asarray(mesh_responses(problem, X, omega, F_static).rms_force)
+    b = np.asarray(mesh_responses(wide, sol.X, omega, F_static).rms_force)
+    floor = RMS_FLOOR * max(float(np.max(b)), 1e-300)
+    return float(np.max(np.abs(a - b) / np.maximum(b, floor)))
+
+
+class TruncationWarning(UserWarning):
+    """A result whose truncation estimate exceeds ``TRUNCATION_TARGET`` (kept, flagged)."""

@@ -1,0 +1,202 @@
+"""An independent re-check of a phasing optimisation: fresh sweeps with backlash (the
+sweep's own harmonics), time integration from their peak orbits and
+:func:`gearjax.verify_gear` at the peak frequencies, for the baseline and the optimum."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from collections.abc import Callable, Sequence
+
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+
+from ..._engine.time_domain import hb_initial_state
+from ..._gear.toml_io import loads_train
+from ..._io.results import displacement_coefficients
+from ..simulate import simulate_gear
+from ..sweep import sweep
+from ..verify import verify_gear
+from .nonlinear import MAX_DLF
+from .result import OptimizeResult
+from .settings import check_band
+
+
+@dataclasses.dataclass(frozen=True)
+class Recheck:
+    """An independent re-check of a phasing optimisation (:func:`recheck`).
+
+    **Fields:** ``band_hz``: the band swept; ``sweeps``: ``{"baseline", "optimum"}`` ->
+    :class:`~gearjax.SweepResult`, fresh sweeps with backlash (the sweep's own
+    frequency-dependent harmonics, no point budget of the optimiser); ``orbits``: the same
+    keys -> results Dataset of the time integration started from the sweep's peak orbit
+    (one point); ``verify``: the same keys -> :class:`~gearjax.VerifyResult` at
+    ``verify_hz`` (harmonic balance solved afresh at each point, then integrated);
+    ``peaks``: ``pandas.DataFrame``, one row per design: the optimiser's peaks (linear,
+    with backlash), the fresh sweep's peak over its stable points (N), where and on which
+    mesh, the integration's RMS of that mesh from that orbit and their difference, the
+    sweep's points, unstable points, restarts and stop; ``points``: ``pandas.DataFrame``,
+    one row per design and ``verify_hz`` frequency: the largest RMS mesh force by
+    harmonic balance and by integration (N), the largest stage-relative difference, the
+    integration result, whether every mesh is within the tolerance; ``seconds``.
+    """
+
+    band_hz: tuple[float, float]
+    verify_hz: tuple[float, ...]
+    sweeps: dict
+    orbits: dict
+    verify: dict
+    peaks: object
+    points: object
+    seconds: float
+
+
+def band_peak(ds, max_dlf: float = MAX_DLF) -> tuple[float, float, str, int]:
+    """``(peak RMS (N), reference-stage Hz, mesh, point index)`` of a sweep Dataset over
+    its converged, stable points whose load factors are at most ``max_dlf`` (as
+    :class:`NonlinearBand`); ``(nan, nan, "", -1)`` when there is none."""
+    ok = np.asarray(ds["converged"].values, bool) & (np.asarray(ds["stable"].values) == 1)
+    dlf = np.asarray(ds["dlf"].values, float)
+    ok &= np.nanmax(np.where(np.isfinite(dlf), dlf, 0.0), axis=1) <= max_dlf
+    rms = np.where(ok[:, None], np.asarray(ds["rms_force"].values, float), -np.inf)
+    if not np.any(np.isfinite(rms)):
+        return math.nan, math.nan, "", -1
+    i, j = np.unravel_index(int(np.argmax(rms)), rms.shape)
+    return (float(rms[i, j]), float(ds["mesh_frequency_hz"].values[i]),
+            str(ds["mesh"].values[j]), int(i))
+
+
+def point_state(ds, i: int):
+    """``(x0, v0)`` ``(n,)``: the state at ``t = 0`` of point ``i`` of a sweep Dataset
+    (its ``displacement_cos`` / ``displacement_sin`` harmonics), to start an integration
+    on that orbit (:func:`~gearjax.hb_initial_state`)."""
+    X = displacement_coefficients(ds, i)
+    eta = json_solver(ds).get("eta", 1)
+    return hb_initial_state(jnp.asarray(X), float(ds["omega"].values[i]), int(eta))
+
+
+def json_solver(ds) -> dict:
+    """The ``solver`` attribute of a results Dataset, decoded (``{}`` where absent or
+    not JSON)."""
+    try:
+        return json.loads(ds.attrs.get("solver", "{}"))
+    except ValueError:
+        return {}
+
+
+def recheck_designs(result) -> tuple[str, str, tuple, dict]:
+    """``(gear, reference stage, band (Hz), {name: (train, linear peak, backlash peak)})``
+    (peaks in N) of an :class:`OptimizeResult` or of its Dataset.
+
+    **Raises:** ``ValueError`` for anything else.
+    """
+    if isinstance(result, OptimizeResult):
+        return result.gear, result.reference_stage, result.band_hz, {
+            "baseline": (result.baseline_train, result.baseline.linear_peak,
+                         result.baseline.nonlinear_peak),
+            "optimum": (result.train, result.optimum.linear_peak,
+                        result.optimum.nonlinear_peak)}
+    attrs = getattr(result, "attrs", {})
+    if attrs.get("kind") != "optimize":
+        raise ValueError("recheck needs an OptimizeResult or its Dataset (kind 'optimize'), "
+                         f"not {type(result).__name__} of kind {attrs.get('kind')!r}")
+    band = attrs["band_hz"]
+    band = json.loads(band) if isinstance(band, str) else list(band)
+    peak = lambda key: float(attrs.get(key, math.nan))
+    return str(attrs["gear"]), str(attrs["reference_stage"]), tuple(band), {
+        "baseline": (loads_train(attrs["baseline_train_toml"]), peak("baseline_peak_linear"),
+                     peak("baseline_peak_nonlinear")),
+        "optimum": (loads_train(attrs["train_toml"]), peak("optimum_peak_linear"),
+                    peak("optimum_peak_nonlinear"))}
+
+
+def recheck(
+    result,
+    band_hz: tuple[float, float] | None = None,
+    *,
+    verify_hz: Sequence[float] | None = None,
+    harmonics: int | None = None,
+    max_step_hz: float | None = None,
+    max_points: int = 3000,
+    progress: Callable[[str], None] | None = None,
+) -> Recheck:
+    """Re-check the baseline and the optimum of ``result`` independently of the optimiser.
+
+    ``result``: an :class:`OptimizeResult`, or the Dataset of a saved one
+    (:func:`optimize_dataset`, ``gearjax optimize --out``; ``gj.load_results``).
+
+    For each design: (1) a fresh sweep with backlash over ``band_hz`` (default the
+    optimisation's band; a part of it around the peaks is cheaper) by
+    :func:`gearjax.sweep` with its own frequency-dependent harmonics (``harmonics``: a
+    fixed K instead), ``max_step_hz`` and ``max_points``; its peak over stable points
+    (:func:`band_peak`); (2) time integration (diffrax) started from the sweep's peak
+    orbit: a stable orbit is what the integration settles on, with the same RMS; (3)
+    :func:`gearjax.verify_gear` at ``verify_hz`` (default: the fresh peak frequencies of
+    both designs), the harmonic balance solved afresh there and integrated.
+
+    **Returns:** :class:`Recheck` (tables ``peaks`` and ``points``). **Raises:**
+    ``ArgumentError`` naming ``band_hz`` for a bad band; ``ValueError`` for a
+    ``result`` of another kind; ``TrainError`` as :func:`gearjax.sweep`.
+    """
+    t0 = time.perf_counter()
+    say = progress or (lambda message: None)
+    gear, ref, band, designs = recheck_designs(result)
+    lo, hi = check_band(band if band_hz is None else band_hz)
+    sweeps, orbits, peak_rows, peak_at = {}, {}, [], {}
+    for name, (train, linear_peak, nonlinear_peak) in designs.items():
+        say(f"recheck: {name}, sweep with backlash {lo:g}-{hi:g} Hz")
+        sw = sweep(train, gear, lo, hi, stage=ref,
+                   harmonics=harmonics, max_step_hz=max_step_hz, max_points=max_points)
+        sweeps[name] = sw
+        ds = sw.dataset
+        peak, f_peak, mesh, i = band_peak(ds)
+        row = {"design": name, "optimiser linear peak (N)": linear_peak,
+               "optimiser backlash peak (N)": nonlinear_peak,
+               "sweep peak (N)": peak, "at (Hz)": f_peak, "mesh": mesh}
+        if i >= 0:
+            peak_at[name] = f_peak
+            say(f"recheck: {name}, {ds.sizes['point']} points in {sw.seconds:.0f} s, peak "
+                f"{peak:.1f} N at {f_peak:.1f} Hz ({mesh}); integrating from that orbit")
+            x0, v0 = point_state(ds, i)
+            ni = simulate_gear(train, gear, [f_peak], stage=ref, x0=x0, v0=v0)
+            orbits[name] = ni
+            j = list(ds["mesh"].values).index(mesh)
+            rms_ni = float(ni["rms_force"].values[0, j])
+            row.update({"integrated (N)": rms_ni, "rel diff": abs(rms_ni - peak) / peak,
+                        "integration": str(ni["result"].values[0])})
+        else:
+            row.update({"integrated (N)": math.nan, "rel diff": math.nan,
+                        "integration": "no stable point"})
+        stable = np.asarray(ds["stable"].values)
+        row.update({"points": int(ds.sizes["point"]), "unstable": int(np.sum(stable == 0)),
+                    "restarts": len(sw.restarts), "stop": sw.stop,
+                    "sweep seconds": sw.seconds})
+        peak_rows.append(row)
+    if verify_hz is None:
+        verify_hz = sorted({round(f, 3) for f in peak_at.values()})
+    verify_hz = tuple(float(f) for f in verify_hz)
+    checks, point_rows = {}, []
+    if verify_hz:
+        for name, (train, *_) in designs.items():
+            say(f"recheck: {name}, harmonic balance and time integration at "
+                f"{', '.join(f'{f:g}' for f in verify_hz)} Hz")
+            v = verify_gear(train, gear, list(verify_hz), stage=ref, harmonics=harmonics)
+            checks[name] = v
+            for k, f in enumerate(verify_hz):
+                hb_row, ni_row = v.rms_hb[k], v.rms_ni[k]
+                j = int(np.nanargmax(hb_row)) if np.any(np.isfinite(hb_row)) else 0
+                point_rows.append({
+                    "design": name, "Hz": f, "mesh": str(v.hb["mesh"].values[j]),
+                    "harmonic balance (N)": float(hb_row[j]),
+                    "integration (N)": float(ni_row[j]),
+                    "max rel diff": float(np.nanmax(v.rel_diff[k]))
+                    if np.any(np.isfinite(v.rel_diff[k])) else math.nan,
+                    "hb stable": bool(v.hb["stable"].values[k] == 1),
+                    "integration": str(v.ni["result"].values[k]),
+                    "all meshes ok": bool(np.all(v.ok[k]))})
+    return Recheck(band_hz=(lo, hi), verify_hz=verify_hz, sweeps=sweeps, orbits=orbits,
+                   verify=checks, peaks=pd.DataFrame(peak_rows).set_index("design"),
+                   points=pd.DataFrame(point_rows), seconds=time.perf_counter() - t0)

@@ -1,0 +1,167 @@
+"""The sweep's entry point: a gear's frequency response over a band."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..._gear.case import gear_case
+from ..._gear.toml_io import dumps_train
+from ..._gear.train import Train
+from .. import concurrency
+from .. import harmonics as _harmonics
+from . import segments as _segments
+from . import speculation as _speculation
+from . import walk as _walk
+from .arguments import check_arguments
+from .context import Context
+from .dataset import point_data, sweep_result_dataset
+from .post import PostStream
+from .record import SweepLog, run_fields
+from .summary import SweepResult
+
+
+def sweep(
+    train: Train,
+    gear: str | None = None,
+    from_hz: float = 2000.0,
+    to_hz: float = 15000.0,
+    *,
+    stage: str | None = None,
+    linear: bool = False,
+    harmonics: int | None = None,
+    eta: int = 1,
+    max_step_hz: float | None = None,
+    points: int = 300,
+    max_points: int = 3000,
+    max_detour: int = _walk.MAX_DETOUR,
+    smoothing: float = 0.0,
+    progress: Callable[[int, float], None] | None = None,
+    journal=None,
+    resume: bool = False,
+    command: str | None = None,
+) -> SweepResult:
+    """Frequency response of ``gear`` from ``from_hz`` to ``to_hz`` (reference-stage mesh Hz).
+
+    **Arguments:** ``stage``: reference stage id (default: first turning stage);
+    ``linear``: drop the backlash; ``harmonics``: fixed K (default: frequency-dependent,
+    :func:`gearjax._studies.harmonics.harmonics_rule`); ``eta``: sub-harmonic index;
+    ``max_step_hz``: largest frequency step (default 1/100 of the band); ``points``:
+    grid size of a linear sweep; ``max_points``: cap on a continuation; ``max_detour``:
+    points a branch may go without passing the furthest frequency it reached before the
+    sweep restarts beyond it (:mod:`~gearjax._studies.sweep.walk`); ``smoothing``:
+    corner rounding of the backlash relative to it (0: exact piecewise-linear, see
+    :func:`gearjax._engine.mesh_force.backlash`); ``progress(points_done,
+    frequency_hz)``: called per point; ``command``: how the sweep was asked for, kept
+    as the dataset's ``command`` attribute (default: empty).
+
+    ``journal``: a file (e.g. ``RESULTS.nc.journal``, :func:`gearjax._io.journal.journal_path`)
+    where every finished point (continuation) or segment (linear grid) is appended as it
+    is found, with what the continuation needs to go on (scaled solution, tangent, step,
+    parameter, harmonics, segment); ``resume``: continue the run that the existing
+    ``journal`` holds instead of starting afresh (nothing is recomputed; the result is
+    that of an uninterrupted run). Without ``resume`` an existing journal is refused (it
+    is an interrupted run's work); a journal of another run (train text, gear,
+    arguments) is refused naming the field. The caller deletes the journal once it has
+    saved the results. Responses and stability are computed from the solutions, not
+    journaled: beside the continuation as it finds them, the rest at the end
+    (:class:`~gearjax._studies.sweep.post.PostStream`).
+
+    **Segments.** K is fixed within a segment of the band
+    (:mod:`~gearjax._studies.sweep.segments`). A segment continued from the one before
+    starts on their boundary, by Newton from the chord of the branch across it. Where
+    threads are allowed (:mod:`gearjax._studies.concurrency`) the last segment is
+    continued in a thread from its own start while the others run, and kept where the
+    branch arriving there enters it on the same orbit
+    (:mod:`~gearjax._studies.sweep.speculation`): the same result with or without the
+    thread.
+
+    **Branch restarts** (:mod:`~gearjax._studies.sweep.walk`): where a branch closes on
+    itself, detours, runs away or cannot go on, the sweep keeps its points and starts a
+    new branch beyond the furthest frequency it reached. Each point carries its
+    ``branch`` number and ``restarts`` lists where and why, so the frequencies between
+    are known to be unexplored.
+
+    **Raises:** ``ArgumentError`` (a ``TrainError``) naming the argument for arguments
+    that cannot describe a sweep, too few or too many harmonics, or ``resume`` without
+    a ``journal``; ``TrainError`` for a gear where no mesh turns, an impractical ``mu``,
+    an unknown stage, backlash on an unloaded stage without ``drag_torque``, or a
+    journal that cannot be resumed.
+    """
+    t_start = time.perf_counter()
+    check_arguments(from_hz, to_hz, eta=eta, smoothing=smoothing, harmonics=harmonics,
+                    max_step_hz=max_step_hz, points=points, max_points=max_points)
+    case = gear_case(train, gear, stage, linear)
+    system = case.system
+    min_k = _harmonics.excitation_floor(system, eta)
+    if harmonics is not None:
+        _harmonics.require_harmonics(system, harmonics, eta)
+    cutoff_hz = _harmonics.response_cutoff_hz(system)
+    segments = _segments.band_segments(from_hz, to_hz, case.mu_ref, min_k, eta, harmonics,
+                                       cutoff_hz)
+    for K in sorted({k for *_, k in segments}):
+        _harmonics.require_size(system, K, mu=case.mu)
+    F_static = jnp.asarray(case.F_static)
+    runaway = _walk.RUNAWAY * (np.abs(np.asarray(F_static)) / np.asarray(system.kbar)
+                               + np.asarray(system.backlash))  # RMS mesh deflection limit (m)
+    train_toml = dumps_train(train)
+    run = run_fields(train_toml, gear=case.gear.name, stage=case.stage, from_hz=from_hz,
+                     to_hz=to_hz, linear=linear, harmonics=harmonics, eta=eta,
+                     max_step_hz=max_step_hz, smoothing=smoothing, points=points,
+                     max_points=max_points)
+    log = SweepLog.open(journal, run, resume)
+    ctx = Context(system=system, eta=eta, smoothing=smoothing, from_hz=from_hz,
+                  to_hz=to_hz, mu_ref=case.mu_ref, max_step_hz=max_step_hz,
+                  max_points=max_points, max_detour=max_detour, runaway=runaway)
+    try:
+        segments, truncation = _segments.checked_segments(ctx, segments, F_static,
+                                                          fixed=harmonics is not None)
+    except BaseException:
+        log.close()
+        raise
+    solver = {"method": "harmonic balance", "linear": linear, "eta": eta,
+              "segments": [list(s) for s in segments], "reference_stage": case.stage,
+              "max_step_hz": max_step_hz, "cutoff_hz": cutoff_hz,
+              "truncation": truncation, "truncation_target": _harmonics.TRUNCATION_TARGET,
+              "smoothing": smoothing}
+    walk = _walk.Walk(segments=list(segments))
+    post = PostStream(F_static)
+    _run_walk(ctx, walk, log, post, linear=linear, points=points, progress=progress)
+    data = point_data(walk, log, post, ctx, F_static, linear=linear)
+    ds = sweep_result_dataset(data, case, F_static=F_static, train_toml=train_toml,
+                              solver=solver, folds=walk.folds, stop=walk.stop,
+                              restarts=walk.restarts,
+                              command="" if command is None else command)
+    return SweepResult(dataset=ds, folds_hz=tuple(walk.folds), stop=walk.stop,
+                       segments=tuple(walk.segments), seconds=time.perf_counter() - t_start,
+                       restarts=tuple(walk.restarts))
+
+
+def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress) -> None:
+    """Walk every segment (a linear grid, or the continuations with the last segment
+    speculated); the journal is closed after, and the post-processing stopped where the
+    walk is interrupted. BLAS keeps a core for the post-processing while a continuation
+    runs (:func:`gearjax._studies.concurrency.limit_blas`)."""
+    last = walk.segments[-1]
+    blas = None if linear else concurrency.limit_blas()  # a linear sweep's post comes after
+    spec = None
+    try:
+        if linear:
+            _walk.linear_segments(ctx, walk, log, points, progress)
+        while not linear and len(walk.problems) < len(walk.segments):
+            entered, spec = _speculation.speculate(ctx, walk, log, post, spec, last)
+            if not _walk.walk_segment(ctx, walk, log, post, progress=progress,
+                                      entered=entered):
+                break
+    except BaseException:
+        post.close()
+        raise
+    finally:
+        if spec is not None:
+            spec.cancel()
+        if blas is not None:
+            blas.restore_original_limits()
+        log.close()

@@ -1,0 +1,88 @@
+"""A sweep's points gathered from its records into the results Dataset
+(:mod:`gearjax._io.results` layout, plus ``branch`` and ``max_multiplier``)."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..._engine import hb as _hb
+from ..._io.results import add_displacement_harmonics, mesh_coordinates, sweep_dataset
+from .post import bifurcations, point_rows
+
+
+def point_data(walk, log, post, ctx, F_static, *, linear: bool) -> dict:
+    """Per-point arrays of the walk's segments, in sweep order: ``responses``,
+    ``omega``, ``result``, ``X`` (list: K differs between segments), ``K``, ``stable``,
+    ``max_multiplier``, ``multipliers``, ``excluded``, ``branch``. A segment continued by
+    the next ends with a point past the boundary, which the next one starts on (or,
+    where it could not, from that point): that point is left out.
+
+    **Raises:** ``RuntimeError`` where the sweep found no point."""
+    rows: list[dict] = []
+    branch = 0
+    problems, fresh = walk.problems, walk.fresh
+    for j, problem in enumerate(problems):
+        if linear:
+            batch = log.batch(j)
+            rows.append(point_rows(problem, jnp.asarray(batch["X"]),
+                                   jnp.asarray(batch["omega"]), batch["result"], F_static))
+            rows[-1]["branch"] = np.zeros(len(batch["omega"]), int)
+            continue
+        pts = log.points(j)
+        last = len(pts) - (j + 1 < len(problems) and j + 1 not in fresh
+                           and bool(log.points(j + 1)))
+        branch += j in fresh and j > 0
+        if last <= 0:
+            continue
+        rows.append(post.rows(j, problem, ctx.omega_ref, pts[:last]))
+        rows[-1]["branch"] = np.full(last, branch)
+    post.close()
+    if not rows:
+        raise RuntimeError(f"sweep produced no point: {walk.stop}")
+    data = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]
+            if k not in ("responses", "X")}
+    data["X"] = [X for r in rows for X in r["X"]]
+    data["responses"] = jax.tree.map(lambda *a: np.concatenate(a),
+                                     *[r["responses"] for r in rows])
+    return data
+
+
+def sweep_result_dataset(data: dict, case, *, F_static, train_toml: str, solver: dict,
+                         folds: list, stop: str, restarts: list, command: str):
+    """The results Dataset of the sweep points ``data`` (:func:`point_data`) of the
+    gear ``case`` (:class:`gearjax._gear.case.GearCase`) with static mesh forces
+    ``F_static`` ``(m,)`` (N): frequencies from the base frequencies ``omega``,
+    bifurcations along each branch, the ``solver`` settings, and the attributes
+    ``kind = "sweep"``, ``folds_hz``, ``stop``, ``reference_stage``, ``bifurcations``,
+    ``restarts`` and ``command`` (how the sweep was asked for)."""
+    omegas = data["omega"]
+    f_ref = omegas * case.mu_ref / (2 * math.pi)
+    stage_hz = np.outer(omegas / (2 * math.pi), np.asarray(case.mu, float))
+    bif = bifurcations(f_ref, data["stable"], data["multipliers"], data["excluded"],
+                       data["branch"])
+    system = case.system
+    ds = sweep_dataset(
+        data["responses"], **mesh_coordinates(system),
+        mesh_frequency_hz=f_ref,
+        stage_mesh_frequency_hz=stage_hz,
+        input_rpm=np.array([case.kin.input_rpm(case.stage, f) for f in f_ref]),
+        omega=omegas,
+        result=[_hb.RESULTS[c] for c in data["result"]],
+        stable=data["stable"],
+        static_force=np.asarray(F_static),
+        train_toml=train_toml,
+        gear=case.gear.name,
+        solver=solver,
+        attrs={"kind": "sweep", "folds_hz": folds, "stop": stop,
+               "reference_stage": case.stage, "bifurcations": bif, "restarts": restarts,
+               "command": command},
+    )
+    ds["branch"] = ("point", data["branch"], {
+        "units": "1", "long_name": "solution branch (a new one after each restart)"})
+    ds["max_multiplier"] = ("point", data["max_multiplier"], {
+        "units": "1", "long_name": "largest Floquet multiplier modulus (rigid-body excluded)"})
+    return add_displacement_harmonics(ds, data["X"], system.dof_labels, data["K"])

@@ -1,0 +1,161 @@
+"""Where a branch of a sweep starts: Newton from a guess, from the orbit a time
+integration settles to, or from the homotopy in backlash; and independent points
+solved from scratch."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..._engine import aft as _aft
+from ..._engine import continuation as _continuation
+from ..._engine import hb as _hb
+from ..._engine import time_domain as _time_domain
+from ..._engine.newton import newton_jit, solve_hb, solve_linear
+
+newton = newton_jit
+"""The compiled Newton solve ``newton(problem, omega, y)`` every start uses."""
+
+SETTLE_PERIODS = 40
+"""Base periods a start by time integration (:func:`settled_start`) integrates at most;
+the orbit need not have settled to the periodicity tolerance: it is Newton's first
+guess."""
+
+SETTLE_RTOL = 1e-6
+"""Integration tolerance of :func:`settled_start`: its orbit is only Newton's first
+guess (the periodicity check is at ``100 SETTLE_RTOL``)."""
+
+
+def enter_segment(problem, previous, lam, omega_ref, guess=None):
+    """``(y, result code, lambda)``: scaled unknowns with this segment's harmonics,
+    converged at ``lambda``, where the segment starts.
+
+    Continuing ``previous`` ``(K, y, lambda, before)`` (the last point of the segment
+    before, which lies past ``lam``, the boundary, and the point before it): at ``lam``
+    itself, by Newton from the chord between the two, so that the next segment starts
+    on the boundary (where a speculation on it starts too); where that Newton fails, at
+    the last point's own ``lambda`` from it. A fresh branch starts at ``lam``, its first
+    guess ``guess`` ``(K, y, lambda)`` (the furthest point of the branch before, as a
+    rig's response jumps from it) and then :func:`start_point` from that point's
+    state."""
+    if previous is None:
+        state = None
+        if guess is not None:
+            K_old, y_old, _ = guess
+            y = resize_harmonics(y_old, K_old, problem)
+            sol = newton(problem, jnp.asarray(lam * omega_ref), y)
+            if int(sol.result) == _hb.CONVERGED:
+                return sol.y, _hb.CONVERGED, lam
+            state = _time_domain.hb_initial_state(y.reshape(problem.shape) * problem.x_scale,
+                                                  lam * omega_ref, problem.settings.eta)
+        return (*start_point(problem, lam * omega_ref, state), lam)
+    K_old, y_old, lam_old, before = previous
+    if before is not None and (before[1] - lam) * (lam_old - lam) < 0:
+        w = (lam - before[1]) / (lam_old - before[1])
+        chord = (1 - w) * np.asarray(before[0]) + w * np.asarray(y_old)
+        sol = newton(problem, jnp.asarray(lam * omega_ref),
+                     resize_harmonics(chord, K_old, problem))
+        if int(sol.result) == _hb.CONVERGED:
+            return sol.y, _hb.CONVERGED, lam
+    sol = newton(problem, jnp.asarray(lam_old * omega_ref),
+                 resize_harmonics(y_old, K_old, problem))
+    return sol.y, int(sol.result), lam_old
+
+
+def start_point(problem, omega, state=None):
+    """``(y, result code)`` at ``omega`` (rad/s): Newton from the linear, in-contact
+    guess; with backlash, when that fails, :func:`backlash_start`. With a ``state``
+    ``(x0, v0)`` (where a branch left off) the time integration starts from it, and
+    before Newton."""
+    backlash = problem.system.has_backlash
+    if state is not None and backlash:
+        sol = settled_start(problem, omega, state)
+        if int(sol.result) == _hb.CONVERGED:
+            return sol.y, _hb.CONVERGED
+    sol = newton(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
+    if int(sol.result) != _hb.CONVERGED and backlash:
+        # the integration from ``state`` failed already: straight to the homotopy
+        sol = backlash_start(problem, omega) if state is None else backlash_homotopy(
+            problem, omega)
+    return sol.y, int(sol.result)
+
+
+def backlash_start(problem, omega) -> _hb.HBSolution:
+    """A periodic solution with backlash at ``omega`` (rad/s) where Newton from the
+    linear guess fails (tooth separation far from the in-contact response): Newton from
+    the orbit that a time integration settles to (:func:`settled_start`), else the
+    homotopy in backlash 0 -> b (:func:`backlash_homotopy`, a continuation of a few
+    hundred points at the full K, far slower)."""
+    sol = settled_start(problem, omega)
+    if int(sol.result) == _hb.CONVERGED:
+        return sol
+    return backlash_homotopy(problem, omega)
+
+
+def settled_start(problem, omega, state=None) -> _hb.HBSolution:
+    """Newton from the orbit that a time integration at ``omega`` (rad/s) settles to (a
+    stable one, as a test rig's response settles after a jump), from ``state`` ``(x0,
+    v0)`` or the static contact state (``time_domain.simulate``: Dopri8 at
+    :data:`SETTLE_RTOL`, at most :data:`SETTLE_PERIODS` base periods; the last ``eta``
+    periods give the harmonics). A solver failure is returned as a ``MAX_STEPS``
+    solution at the linear guess."""
+    K, eta = problem.settings.n_harmonics, problem.settings.eta
+    settings = _time_domain.TimeDomain(
+        rtol=SETTLE_RTOL, atol=SETTLE_RTOL, periodic_tol=100 * SETTLE_RTOL,
+        max_periods=SETTLE_PERIODS * eta, sample_periods=eta,
+        n_samples=-(-4 * (K + 1) // eta))
+    x0, v0 = (None, None) if state is None else state
+    tr = _time_domain.simulate(problem.system, omega, x0=x0, v0=v0, settings=settings)
+    X = _aft.analysis(tr.x.T, K)
+    y = (X / problem.x_scale).reshape(-1)
+    if int(tr.result) > _time_domain.NOT_PERIODIC or not bool(jnp.all(jnp.isfinite(y))):
+        y = _hb.linear_guess(problem, omega)
+        return _hb.HBSolution(X=y.reshape(problem.shape) * problem.x_scale, y=y,
+                              omega=jnp.asarray(omega, float),
+                              result=jnp.asarray(_hb.MAX_STEPS),
+                              steps=jnp.asarray(0), residual_norm=jnp.asarray(jnp.inf))
+    return newton(problem, jnp.asarray(omega), y)
+
+
+def backlash_homotopy(problem, omega) -> _hb.HBSolution:
+    """Continue from the linear solution in backlash scale 0 -> 1 at fixed ``omega``
+    (rad/s); Newton at full backlash from the continuation's last point."""
+    param = _continuation.SystemParameter(problem=problem, omega_value=jnp.asarray(omega),
+                                          where=lambda s: s.backlash)
+    lin = _hb.linear_guess(problem, omega)
+    start = newton(param.split(0.0)[0], jnp.asarray(omega), lin)
+    branch = _continuation.continue_branch(param, start.y, 0.0, 1.0,
+                                           _continuation.Settings(max_dlambda=0.05), 500)
+    return newton(problem, jnp.asarray(omega), jnp.asarray(branch.y[-1]))
+
+
+def resize_harmonics(y, K_old: int, problem):
+    """Scaled unknowns of ``K_old`` harmonics padded with zeros or truncated to
+    ``problem``'s K (flat)."""
+    C, n = problem.shape
+    old = np.asarray(y).reshape(2 * K_old + 1, n)
+    new = np.zeros((C, n))
+    rows = min(C, old.shape[0])
+    new[:rows] = old[:rows]
+    return jnp.asarray(new.reshape(-1))
+
+
+def solve_points(problem, omegas):
+    """Independent solutions at the base frequencies ``omegas`` ``(P,)`` (rad/s), from the
+    linear guess: one factorisation each without backlash (``newton.solve_linear``), Newton
+    with backlash; one point after the other (``lax.map``: a vmapped batch of dense
+    factorisations is slower on a CPU)."""
+    if problem.system.has_backlash:
+        return _newton_points(problem, omegas)
+    return _linear_points(problem, omegas)
+
+
+@jax.jit
+def _newton_points(problem, omegas):
+    return jax.lax.map(lambda w: solve_hb(problem, w), omegas)
+
+
+@jax.jit
+def _linear_points(problem, omegas):
+    return jax.lax.map(lambda w: solve_linear(problem, w), omegas)

@@ -1,0 +1,326 @@
+"""Verification of the harmonic balance by time integration, at the same points.
+
+Every point is solved twice:
+
+1. harmonic balance with ``K`` from :func:`~gearjax._studies.harmonics.harmonics_rule` at that
+   point (or the given ``harmonics``); points that share a ``K`` are solved in one
+   batched Newton call from the linear, in-contact guess. With backlash a point
+   whose Newton fails is re-started as the sweep starts a segment: continuation in
+   the backlash from 0 to its value at fixed frequency. In a sweep (``from_hz``,
+   ``to_hz``) with backlash each point first starts from the previous converged
+   point (padded or truncated to its ``K``), so the harmonic balance follows a branch
+   in the sweep direction as far as Newton can step;
+2. time integration from the harmonic-balance state at ``t = 0``
+   (:func:`~gearjax.hb_initial_state`), so both land on the same branch where it is
+   stable (an unstable harmonic-balance orbit is left by the integration: its
+   ``stable`` flag, from Floquet multipliers, says so). A point whose harmonic balance
+   failed is integrated from the static solution in contact.
+
+Comparison, per point and mesh: ``rel_diff = |rms_ni - rms_hb| / max_j rms_hb_j``,
+the maximum over the meshes ``j`` of the same stage. The alternating force of one
+mesh can be small next to its neighbours' (e.g. a stage whose planets' sun meshes
+cancel each other's excitation); relative to its own RMS a tiny force would fail on
+a discretisation difference of a few newtons that is irrelevant to the stage's
+loading, and relative to the stage's largest RMS the tolerance reads "within 1% of
+the dynamic load level of the stage". ``ok`` holds where both methods converged
+(integration: periodic with the base period) and ``rel_diff <= tolerance``: 1% for a
+system without backlash (``linear``, or a train without backlash), 2% with backlash
+(the switches make both methods converge more slowly).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import harmonics as _harmonics
+from .._engine import hb as _hb
+from .._engine import time_domain as td
+from .._errors import bad_argument
+from .._io.results import sweep_dataset
+from .._gear.case import GearCase, gear_case
+from .simulate import frequency_points, integrate, solver_settings, trajectory_dataset
+from .sweep import backlash_start, newton, point_rows, resize_harmonics, solve_points, start_point
+from .._gear.toml_io import dumps_train
+from .._gear.train import Train
+
+TOL_LINEAR, TOL_NONLINEAR = 0.01, 0.02
+"""Default tolerances on ``rel_diff`` without and with backlash."""
+
+
+@dataclasses.dataclass(frozen=True)
+class VerifyResult:
+    """Harmonic balance against time integration at ``P`` points, ``m`` meshes.
+
+    **Fields:** ``hb``, ``ni``: results Datasets (``_results`` layout) of the harmonic
+    balance (``stable`` from Floquet multipliers; per point ``harmonics``) and of the
+    integration (``period``, ``periods``, ``num_steps``); ``rms_hb``, ``rms_ni``,
+    ``rel_diff`` ``(P, m)``: RMS alternating mesh forces (N) and their difference
+    relative to the largest harmonic-balance RMS of the mesh's stage (NaN where a
+    method failed); ``ok`` ``(P, m)``: both converged and ``rel_diff <= tolerance``;
+    ``tolerance``; ``seconds``: wall time of each method (``harmonic_balance``,
+    ``integration``, with compilation) and ``total``.
+    """
+
+    hb: object
+    ni: object
+    rms_hb: np.ndarray
+    rms_ni: np.ndarray
+    rel_diff: np.ndarray
+    ok: np.ndarray
+    tolerance: float
+    seconds: dict
+
+    @property
+    def all_ok(self) -> bool:
+        return bool(np.all(self.ok))
+
+
+def verify_gear(
+    train: Train,
+    gear: str | None = None,
+    at_hz: Sequence[float] | None = None,
+    *,
+    from_hz: float | None = None,
+    to_hz: float | None = None,
+    points: int | None = None,
+    stage: str | None = None,
+    linear: bool = False,
+    harmonics: int | None = None,
+    tol_linear: float = TOL_LINEAR,
+    tol_nonlinear: float = TOL_NONLINEAR,
+    settings: td.TimeDomain = td.TimeDomain(),
+    batch_size: int | None | str = "auto",
+    progress: Callable[[str], None] | None = None,
+    command: str | None = None,
+) -> VerifyResult:
+    """RMS mesh forces of ``gear`` by harmonic balance and by time integration.
+
+    **Arguments:** the points (``at_hz``, or ``from_hz``, ``to_hz``, ``points``),
+    ``stage``, ``linear``, ``settings``, ``batch_size`` as
+    :func:`~gearjax._studies.simulate.simulate_gear`; ``harmonics``: fixed K (default: the
+    frequency-dependent rule of the sweep); ``tol_linear``, ``tol_nonlinear``:
+    tolerances on ``rel_diff`` without and with backlash (module docstring);
+    ``progress(message)``: called as each method starts and ends; ``command``: how the
+    verification was asked for, kept as both datasets' ``command`` attribute (default:
+    empty).
+
+    **Returns:** :class:`VerifyResult`. **Raises:** ``ArgumentError`` (a ``TrainError``)
+    naming the argument for bad frequencies, harmonics or tolerances, and as
+    :func:`~gearjax._gear.case.gear_case`.
+    """
+    t0 = time.perf_counter()
+    f_hz, is_sweep = frequency_points(at_hz, from_hz, to_hz, points)
+    for name, tol in (("tol_linear", tol_linear), ("tol_nonlinear", tol_nonlinear)):
+        if not (0 < tol < 1):
+            raise bad_argument(name, tol, "must be a relative tolerance in (0, 1)")
+    if harmonics is not None and (int(harmonics) != harmonics or harmonics < 1):
+        raise bad_argument("harmonics", harmonics, "must be an integer >= 1")
+    case = gear_case(train, gear, stage, linear)
+    tolerance = tol_nonlinear if case.has_backlash else tol_linear
+    say = progress or (lambda message: None)
+
+    say(f"verify: harmonic balance at {len(f_hz)} points")
+    hb = harmonic_balance_points(case, f_hz, harmonics, follow=is_sweep and case.has_backlash)
+    t_hb = time.perf_counter() - t0
+    say(f"verify: harmonic balance done in {t_hb:.1f} s; integrating from its states")
+    omegas = case.omega(f_hz)
+    x0, v0 = jax.vmap(td.hb_initial_state)(jnp.asarray(hb["X"]), jnp.asarray(omegas))
+    x_static, _ = td.contact_state(case.system)
+    good = hb["result"] == _hb.CONVERGED
+    x0 = jnp.where(good[:, None], x0, x_static[None, :])
+    v0 = jnp.where(good[:, None], v0, 0.0)
+    tr = integrate(case, f_hz, False, x0, v0, settings, batch_size)
+    jax.block_until_ready(tr)
+    t_ni = time.perf_counter() - t0 - t_hb
+    say(f"verify: integration done in {t_ni:.1f} s")
+
+    solver = {"linear": linear, "reference_stage": case.stage,
+              "mode": "sweep" if is_sweep else "points"}
+    common = {"command": "" if command is None else command, "mode": solver["mode"]}
+    hb_ds = sweep_dataset(
+        hb["responses"], **case.point_coordinates(f_hz),
+        result=[_hb.RESULTS[c] for c in hb["result"]],
+        stable=hb["stable"],
+        static_force=case.F_static,
+        train_toml=dumps_train(case.train),
+        gear=case.gear.name,
+        solver={"method": "harmonic balance", "harmonics": harmonics, **solver},
+        attrs={"reference_stage": case.stage, "seconds": t_hb, **common},
+    )
+    hb_ds["harmonics"] = ("point", hb["harmonics"], {"units": "1",
+                                                     "long_name": "solution harmonics K"})
+    ni_ds = trajectory_dataset(case, f_hz, tr, {**solver_settings(settings), **solver},
+                               attrs={"start": "harmonic balance", "seconds": t_ni, **common})
+    rms_hb, rms_ni, rel, ok = compare(hb_ds, ni_ds, tolerance)
+    return VerifyResult(hb=hb_ds, ni=ni_ds, rms_hb=rms_hb, rms_ni=rms_ni, rel_diff=rel, ok=ok,
+                        tolerance=tolerance,
+                        seconds={"harmonic_balance": t_hb, "integration": t_ni,
+                                 "total": time.perf_counter() - t0})
+
+
+def compare(hb_ds, ni_ds, tolerance: float):
+    """``(rms_hb, rms_ni, rel_diff, ok)``, each ``(P, m)``, of two results Datasets at
+    the same points (``rel_diff`` relative to the largest ``rms_hb`` of the mesh's stage;
+    module docstring)."""
+    rms_hb = np.asarray(hb_ds["rms_force"].values, dtype=float)
+    rms_ni = np.asarray(ni_ds["rms_force"].values, dtype=float)
+    both = (np.asarray(hb_ds["converged"].values) & np.asarray(ni_ds["converged"].values))
+    stages = np.asarray(hb_ds["stage"].values)
+    scale = np.full_like(rms_hb, np.nan)
+    for s in np.unique(stages):
+        cols = stages == s
+        with np.errstate(invalid="ignore"):
+            scale[:, cols] = np.max(rms_hb[:, cols], axis=1, keepdims=True)
+    diff = np.abs(rms_ni - rms_hb)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.where(diff == 0, 0.0, diff / scale)
+    rel = np.where(both[:, None], rel, np.nan)
+    with np.errstate(invalid="ignore"):
+        ok = both[:, None] & (rel <= tolerance)
+    return rms_hb, rms_ni, rel, ok
+
+
+# ----------------------------------------------------------------- harmonic balance
+
+
+def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
+                            follow: bool = False) -> dict:
+    """Harmonic-balance solutions of ``case`` at ``f_hz`` (Hz), in the order given.
+
+    ``K`` per point from :func:`~gearjax._studies.harmonics.harmonics_rule` (or ``harmonics``);
+    one batched Newton solve from the linear guess per distinct ``K``, then, with
+    backlash, :func:`~gearjax._studies.sweep.backlash_start` for each point that failed. ``follow``: first
+    start each point from the previous converged one (a sweep).
+
+    **Returns:** a dict of per-point arrays: ``X`` ``(P, 2Kmax+1, n)`` (coefficients
+    zero-padded to the largest K), ``harmonics`` ``(P,)``, ``result`` ``(P,)`` codes
+    (``_hb.RESULTS``), ``stable`` ``(P,)`` bool, and ``responses``
+    (:class:`~gearjax.MeshResponses`, fields ``(P, m)``; NaN where not converged).
+    """
+    f_hz = np.asarray(f_hz, dtype=float)
+    omegas = case.omega(f_hz)
+    min_k = _harmonics.excitation_floor(case.system)
+    if harmonics is not None:
+        _harmonics.require_harmonics(case.system, harmonics)
+    cutoff = _harmonics.response_cutoff_hz(case.system)
+    ks = np.array([harmonics if harmonics is not None else
+                   _harmonics.harmonics_rule(f / case.mu_ref, min_k, cutoff_hz=cutoff)
+                   for f in f_hz], dtype=int)
+    for K in np.unique(ks):
+        _harmonics.require_size(case.system, int(K), mu=case.mu)
+    P, n, K_max = len(f_hz), case.system.n_dof, int(ks.max())
+    X = np.zeros((P, 2 * K_max + 1, n))
+    result = np.full(P, _hb.MAX_STEPS)
+    stable = np.zeros(P, dtype=bool)
+    rows = [None] * P
+    problems = {int(K): _hb.hb_problem(case.system, _hb.HarmonicBalance(n_harmonics=int(K)))
+                for K in np.unique(ks)}
+    ys = [None] * P
+    if follow:
+        previous = None
+        for i in range(P):
+            problem = problems[int(ks[i])]
+            y, code = None, _hb.MAX_STEPS
+            if previous is not None:
+                sol = newton(problem, jnp.asarray(omegas[i]),
+                             resize_harmonics(*previous, problem))
+                y, code = sol.y, int(sol.result)
+            if code != _hb.CONVERGED:
+                y, code = start_point(problem, omegas[i])
+            ys[i], result[i] = y, code
+            if code == _hb.CONVERGED:
+                previous = (y, int(ks[i]))
+    else:
+        for K, problem in problems.items():
+            idx = np.flatnonzero(ks == K)
+            sols = solve_points(problem, jnp.asarray(omegas[idx]))
+            codes = np.asarray(sols.result)
+            for j, i in enumerate(idx):
+                ys[i], result[i] = sols.y[j], int(codes[j])
+                if codes[j] != _hb.CONVERGED and case.has_backlash:
+                    sol = backlash_start(problem, omegas[i])
+                    ys[i], result[i] = sol.y, int(sol.result)
+    for K, problem in problems.items():
+        idx = np.flatnonzero(ks == K)
+        Xs = jnp.stack([ys[i] for i in idx]).reshape((-1,) + problem.shape) * problem.x_scale
+        post = point_rows(problem, Xs, jnp.asarray(omegas[idx]), result[idx],
+                          jnp.asarray(case.F_static))
+        for j, i in enumerate(idx):
+            X[i, :problem.shape[0]] = np.asarray(Xs[j])
+            stable[i] = bool(post["stable"][j])
+            rows[i] = jax.tree.map(lambda a: np.asarray(a[j]), post["responses"])
+    responses = jax.tree.map(lambda *a: np.stack(a), *rows)
+    failed = result != _hb.CONVERGED
+    responses = jax.tree.map(lambda a: np.where(failed[:, None], np.nan, a), responses)
+    return {"X": X, "harmonics": ks, "result": result, "stable": np.where(failed, np.nan,
+                                                                           stable),
+            "responses": responses}
+
+
+# ------------------------------------------------------------------------------ JSON
+
+
+def verify_json(result: VerifyResult) -> dict:
+    """interface.md's ``verify`` JSON: ``points``, each with the point fields of a sweep
+    (``result`` and ``converged`` of both methods) and per mesh ``rms_hb``, ``rms_ni``,
+    ``rel_diff``, ``ok`` (``reason`` where a value is missing)."""
+    hb, ni = result.hb, result.ni
+    names = hb["mesh"].values.tolist()
+    stage, side = hb["stage"].values.tolist(), hb["side"].values.tolist()
+    planet = hb["planet"].values.tolist()
+    points = []
+    for k in range(hb.sizes["point"]):
+        res_hb, res_ni = str(hb["result"].values[k]), str(ni["result"].values[k])
+        conv_hb, conv_ni = bool(hb["converged"].values[k]), bool(ni["converged"].values[k])
+        meshes = []
+        for j, name in enumerate(names):
+            mesh = {"name": str(name), "stage": str(stage[j]), "side": str(side[j]),
+                    "planet": int(planet[j]), "rms_hb": _number(result.rms_hb[k, j]),
+                    "rms_ni": _number(result.rms_ni[k, j]),
+                    "rel_diff": _number(result.rel_diff[k, j]), "ok": bool(result.ok[k, j])}
+            if mesh["rel_diff"] is None:
+                why = [f"harmonic balance {res_hb}"] if not conv_hb else []
+                if not conv_ni:
+                    period = int(ni["period"].values[k])
+                    why.append(f"integration {res_ni}" + (f" (period {period})" if period > 1
+                                                          else ""))
+                mesh["reason"] = "; ".join(why) or "not finite"
+            meshes.append(mesh)
+        stable = int(hb["stable"].values[k])
+        points.append({
+            "mesh_frequency_hz": float(hb["mesh_frequency_hz"].values[k]),
+            "stage_mesh_frequency_hz": [float(v) for v in
+                                        hb["stage_mesh_frequency_hz"].values[k]],
+            "input_rpm": float(hb["input_rpm"].values[k]),
+            "result": res_hb if not conv_hb else res_ni,
+            "converged": conv_hb and conv_ni,
+            "result_hb": res_hb,
+            "result_ni": res_ni,
+            "stable": None if stable < 0 else bool(stable),
+            "period": int(ni["period"].values[k]) or None,  # 0: no repeat found
+            "harmonics": int(hb["harmonics"].values[k]),
+            "ok": bool(np.all(result.ok[k])),
+            "meshes": meshes,
+        })
+    return {
+        "gear": hb.attrs.get("gear"),
+        "reference_stage": hb.attrs.get("reference_stage"),
+        "tolerance": result.tolerance,
+        "relative_to": "largest rms_hb of the mesh's stage at that point",
+        "all_ok": result.all_ok,
+        "max_rel_diff": _number(np.nanmax(result.rel_diff)) if np.any(
+            np.isfinite(result.rel_diff)) else None,
+        "seconds": result.seconds,
+        "points": points,
+    }
+
+
+def _number(x) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None

@@ -1,0 +1,197 @@
+"""Pseudo-arclength continuation through the folds of the clearance oscillator."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.integrate
+
+import gearjax as gj
+from gearjax._engine import aft as _aft
+from gearjax._engine import bordered as _bordered
+from gearjax._engine import continuation as C
+from gearjax._engine import corrector as _corrector
+from gearjax._engine import hb as _hb
+from gearjax._engine import newton as _newton
+
+K, T = 15, 256
+
+
+def oscillator():
+    return gj.system_from_matrices([[1.0]], [[0.1]], [[0.0]], [[1.0]], [1.0], backlash=[1.0],
+                                   f_mean=[0.1], f_cos=[[0.03]], f_sin=[[0.0]], forcing_mu=[1])
+
+
+@pytest.fixture(scope="module")
+def branch():
+    problem = _hb.hb_problem(oscillator(), _hb.HarmonicBalance(n_harmonics=K, n_time=T))
+    param = C.FrequencyParameter(problem=problem, omega_ref=jnp.asarray(1.0))
+    settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02)
+    y0 = _newton.solve_hb(problem, 0.5).y
+    ys, lams, folds, fold_lams, n, code = jax.jit(
+        lambda y: C.continue_compiled(param, y, 0.5, 1.5, settings, 400))(y0)
+    n = int(n)
+    X = np.asarray(ys[:n]).reshape(n, 2 * K + 1, 1) * np.asarray(problem.x_scale)
+    x = np.asarray(jax.vmap(lambda c: _aft.synthesis(c, T))(jnp.asarray(X)))[..., 0]
+    return {"lam": np.asarray(lams[:n]), "amp": (x.max(1) - x.min(1)) / 2, "code": int(code),
+            "folds": C.distinct_folds(np.asarray(fold_lams[:n])[np.asarray(folds[:n])]),
+            "problem": problem, "param": param, "settings": settings, "y0": y0}
+
+
+def ivp_amplitude(omega, z0, periods=80):
+    """Independent reference: integrate x'' + 0.1x' + g(x) = 0.1 + 0.03 cos(w t)."""
+    def rhs(t, z):
+        x, v = z
+        return [v, 0.1 + 0.03 * np.cos(omega * t) - 0.1 * v - (x - np.clip(x, -1, 1))]
+
+    P = 2 * np.pi / omega
+    sol = scipy.integrate.solve_ivp(rhs, (0, periods * P), z0, rtol=1e-10, atol=1e-12,
+                                    t_eval=np.linspace((periods - 1) * P, periods * P, 2001))
+    return (sol.y[0].max() - sol.y[0].min()) / 2
+
+
+def test_reaches_the_end_through_both_folds(branch):
+    assert C.STOP_REASONS[branch["code"]] == "reached_end"
+    assert branch["lam"][-1] >= 1.5
+    # pyHarm and NLvib put the folds near 0.852 and 0.6365 (issue 3)
+    folds = np.sort(branch["folds"])
+    assert len(folds) == 2
+    np.testing.assert_allclose(folds, [0.6365, 0.852], atol=2e-3)
+    # the branch crosses Omega = 0.75 three times: lower, unstable middle, upper
+    crossings = np.sum(np.diff(np.sign(branch["lam"] - 0.75)) != 0)
+    assert crossings == 3
+    assert branch["amp"].max() == pytest.approx(0.4328, abs=2e-3)
+
+
+def test_coexisting_branches_match_time_integration(branch):
+    lam, amp = branch["lam"], branch["amp"]
+    near = np.where(np.diff(np.sign(lam - 0.75)) != 0)[0]
+    # amplitude where each segment crosses 0.75, interpolated linearly along the branch
+    hb_amps = sorted(amp[i] + (0.75 - lam[i]) / (lam[i + 1] - lam[i]) * (amp[i + 1] - amp[i])
+                     for i in near)
+    low_ref = ivp_amplitude(0.75, [1.1, 0.0])                 # contact start: low branch
+    high_ref = ivp_amplitude(0.75, [1.1 + 0.8, 0.0])          # large start: impacting branch
+    assert hb_amps[0] == pytest.approx(low_ref, rel=5e-3)
+    assert hb_amps[2] == pytest.approx(high_ref, rel=5e-3)
+    assert high_ref > 3 * low_ref
+    assert low_ref == pytest.approx(abs(0.03 / (1 - 0.75**2 + 0.075j)), rel=1e-6)
+
+
+def test_python_driver_matches_and_compiles_once(branch):
+    problem, settings = branch["problem"], branch["settings"]
+    b1 = C.continue_branch(branch["param"], branch["y0"], 0.5, 0.6, settings, max_points=50)
+    n_before = C._arclength_step_jit._cache_size()
+    b2 = C.continue_branch(branch["param"], _newton.solve_hb(problem, 0.55).y, 0.55, 0.62, settings,
+                           max_points=50)
+    assert C._arclength_step_jit._cache_size() == n_before  # same shapes: no recompilation
+    assert b1.stop == "reached_end" and b2.stop == "reached_end"
+    # on the contact branch the response is linear: first harmonic 0.03 / (1 - w^2 + 0.1 i w)
+    w = b1.omega[-1]
+    X1 = b1.y[-1].reshape(2 * K + 1, 1)[1:3, 0] * float(problem.x_scale[0])
+    assert np.hypot(*X1) == pytest.approx(abs(0.03 / (1 - w**2 + 0.1j * w)), rel=1e-9)
+
+
+def test_stops_with_reason_and_keeps_points(branch):
+    settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02)
+    b = C.continue_branch(branch["param"], branch["y0"], 0.5, 1.5, settings, max_points=5)
+    assert b.stop == "max_points" and len(b.lam) == 5 and np.all(np.isfinite(b.y))
+
+
+class _Circle(C.AbstractParameter):
+    """``y^2 + (lambda - 1)^2 = 1/4``: a closed solution curve (an isola), one unknown."""
+
+    problem: _hb.HBProblem
+
+    def split(self, lam):
+        return self.problem, lam
+
+    def residual(self, y, lam):
+        return y**2 + (lam - 1.0) ** 2 - 0.25
+
+    def jacobian(self, y, lam):
+        return jnp.diag(2 * y)
+
+    def d_lambda(self, y, lam):
+        return 2 * (lam - 1.0) * jnp.ones_like(y)
+
+
+def test_closed_loop_stops_after_one_turn():
+    problem = _hb.hb_problem(oscillator(), _hb.HarmonicBalance(n_harmonics=1, n_time=8))
+    settings = C.Settings(step=0.05, max_step=0.05, max_dlambda=0.05, fold_step=0.05)
+    br = C.continue_branch(_Circle(problem=problem), jnp.asarray([0.5]), 1.0, 3.0, settings,
+                           max_points=2000)
+    assert br.stop == "closed_loop"
+    # one turn of the circle (length pi) in chords of about 0.05, plus the closing stretch
+    turn = np.pi / 0.05
+    assert turn < len(br.lam) < 1.5 * turn
+    np.testing.assert_allclose(br.y[:, 0] ** 2 + (br.lam - 1) ** 2, 0.25, atol=1e-8)
+
+
+def test_branch_through_folds_is_not_a_loop(branch):
+    """The oscillator's branch turns back twice, close to itself: not a closed loop."""
+    br = C.continue_branch(branch["param"], branch["y0"], 0.5, 1.5, branch["settings"], 400)
+    assert br.stop == "reached_end"
+    assert len(C.distinct_folds(br.fold_lam[br.fold])) == 2
+
+
+def test_broyden_step_learns_a_rank_one_jacobian_error():
+    """Broyden's method on a linear system whose starting matrix is off by a rank-one term
+    ends in at most two steps (Gay, SIAM J. Numer. Anal. 16 (1979): at most 2r for rank
+    r), where the chord iteration with that matrix only contracts linearly (0.6 here)."""
+    rng = np.random.default_rng(3)
+    n = 40
+    A = np.eye(n) + 0.1 * rng.standard_normal((n, n))
+    u, v = rng.standard_normal(n), rng.standard_normal(n)
+    B0 = A + 0.6 * np.outer(u, v) / (v @ np.linalg.solve(A, u))  # chord ratio 0.6 / 1.6
+    b = rng.standard_normal(n)
+    exact = np.linalg.solve(A, b)
+    solve = jax.jit(lambda z, steps, i: _corrector.broyden_step(z, steps, i))
+
+    def run(quasi, iterations):
+        z, steps = np.zeros(n), jnp.zeros((8, n))
+        for i in range(iterations):
+            d = -np.linalg.solve(B0, A @ z - b)
+            if quasi:
+                d = np.asarray(solve(jnp.asarray(d), steps, i))
+                steps = steps.at[i].set(d)
+            z = z + d
+        return np.max(np.abs(z - exact)) / np.max(np.abs(exact))
+
+    assert run(True, 3) < 1e-12
+    assert run(False, 3) > 1e-2 and run(False, 30) < 1e-10
+
+
+def test_single_precision_factors(paper_system_h1):
+    """``Settings.single``: the bordered LU in single precision. On the paper gear with
+    tooth separation, solves with those factors are a close preconditioner (relative
+    error far below the corrector's contraction from Jacobian changes) and the refined
+    tangent equals the one from double factors. (The paper sweeps in test_sweep run with
+    single factors end to end.)"""
+    problem = _hb.hb_problem(paper_system_h1, _hb.HarmonicBalance(n_harmonics=8))
+    omega_ref = 2 * np.pi * 2000.0 / 7
+    param = C.FrequencyParameter(problem=problem, omega_ref=jnp.asarray(omega_ref))
+    lam = 3500.0 / 2000.0  # 6% of the mesh samples separated at K = 8
+    sol = _newton.solve_hb(problem, lam * omega_ref)
+    assert bool(sol.converged)
+    deflection = _hb.mesh_samples(problem, sol.X @ paper_system_h1.W.T, lam * omega_ref)[0]
+    assert np.any(np.abs(np.asarray(deflection)) < np.asarray(paper_system_h1.backlash)[:, None])
+    rng = np.random.default_rng(0)
+    ty0, tlam0 = jnp.asarray(rng.normal(size=sol.y.size)), 1.0
+    rhs = jnp.asarray(rng.normal(size=sol.y.size + 1))
+
+    @jax.jit
+    def tangents_and_solves(y):
+        out = []
+        for single in (False, True):
+            # NaN where the refinement would not converge: it must
+            ty, tlam, factors = C.tangent_factors(param, y, lam, ty0, tlam0, single,
+                                                  fallback=jnp.full(y.size + 1, jnp.nan))
+            out.append((jnp.append(ty, tlam), _bordered.solve(factors, rhs), factors.lu))
+        return out
+
+    (t_double, x_double, lu_double), (t_single, x_single, lu_single) = tangents_and_solves(
+        sol.y)
+    assert lu_double.dtype == jnp.float64 and lu_single.dtype == jnp.float32
+    np.testing.assert_allclose(t_single, t_double, atol=1e-10)
+    error = float(jnp.linalg.norm(x_single - x_double) / jnp.linalg.norm(x_double))
+    assert 1e-12 < error < 1e-3  # single-precision solves: not exact, and close
