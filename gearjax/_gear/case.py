@@ -31,12 +31,11 @@ def reference_stage(train: Train, kin: Kinematics, stage: str | None) -> str:
         return next(s.id for s in kin.stages if s.turning)
     if stage not in train.stage_ids:
         raise bad_argument("stage", stage, f"no such stage; stages are "
-                   f"{list(train.stage_ids)}")
+                           f"{list(train.stage_ids)}")
     if not kin.stage(stage).turning:
         raise bad_argument("stage", stage, f"stage {stage!r} does not turn in gear "
-                   f"{kin.gear!r}: its mesh frequency is 0")
+                           f"{kin.gear!r}: its mesh frequency is 0")
     return stage
-
 
 
 def check_unloaded(train: Train, g: Gear, kin: Kinematics, system: System) -> None:
@@ -51,8 +50,7 @@ def check_unloaded(train: Train, g: Gear, kin: Kinematics, system: System) -> No
             raise fail(train.source, f"gears.{g.name}.drag_torque", 0.0,
                        f"stage {s.id!r} carries no static load in gear {g.name!r} (a central "
                        "member is free), so with backlash its meshes rattle at an undetermined "
-                       "mean position: give the gear a drag_torque, or solve the linear model")
-
+                       "mean position: give the gear a drag_torque, or solve with `linear`")
 
 
 @dataclasses.dataclass(frozen=True)
