@@ -35,13 +35,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import gearjax as gj
-from gearjax._engine import bordered as _bordered
-from gearjax._engine import hb as _hb
-from gearjax._studies import sweep as _sweep
-from gearjax._gear.assembly import assemble
-from gearjax._plot.save import plot_sweep
-from gearjax._engine.verdict import stability
-from gearjax._studies.sweep import progress_printer, sweep
 
 
 def _best_of(fn, *args, repeat: int = 5) -> float:
@@ -59,36 +52,36 @@ def breakdown(train, result) -> None:
     """Cost per K, at a point of its first segment (ms, compile excluded): one residual,
     one structured Jacobian, one bordered factorisation + solve of the continuation, done
     dense (the Jacobian, its LU) and condensed to the motions that deflect a mesh
-    (``gearjax._engine.bordered``), the latter also with its LU in single precision (what the
+    (``gearjax.bordered_factor``), the latter also with its LU in single precision (what the
     sweep's continuation does), and one Floquet stability evaluation."""
     ds = result.dataset
-    system = assemble(train, "first")
+    system = gj.assemble(train, "first")
     if bool(json.loads(ds.attrs["solver"])["linear"]):
         system = dataclasses.replace(system, backlash=jnp.zeros_like(system.backlash))
     print(f"{'K':>4} {'unknowns':>9} {'condensed':>10} {'residual':>9} {'jacobian':>9} "
           f"{'dense LU':>9} {'condensed':>10} {'ratio':>6} {'single':>7} {'stability':>10} "
           f"{'post/pt':>8}"
           f"  (ms, one evaluation; factor + solve of the bordered system, Jacobian included;"
-          f" post/pt: responses + stability of 32 points, {_sweep.concurrency.threads()} threads)")
+          f" post/pt: responses + stability of 32 points, {gj.threads()} threads)")
     first = {}  # the first segment of each K
     for f_a, f_b, K in result.segments:
         first.setdefault(K, (f_a, f_b))
     for K, (f_a, f_b) in first.items():
-        problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=K))
+        problem = gj.hb_problem(system, gj.HarmonicBalance(n_harmonics=K))
         dense = dataclasses.replace(problem, mesh_null=None)
         i = int(np.argmin(np.abs(ds["mesh_frequency_hz"].values - (f_a + f_b) / 2)))
         omega = jnp.asarray(float(ds["omega"].values[i]))
-        y = _hb.linear_guess(problem, omega)
-        g = _hb.omega_derivative(problem, y, omega)
+        y = gj.linear_guess(problem, omega)
+        g = gj.omega_derivative(problem, y, omega)
         t = jnp.ones(problem.size + 1) / np.sqrt(problem.size + 1)
-        res = jax.jit(_hb.residual)
-        jac = jax.jit(_hb.jacobian)
-        bordered = jax.jit(lambda p, y, w, g, t, single: _bordered.solve(
-            _bordered.factor(p, y, w, g, t[:-1], t[-1], single), t), static_argnums=5)
+        res = jax.jit(gj.hb_residual)
+        jac = jax.jit(gj.hb_jacobian)
+        bordered = jax.jit(lambda p, y, w, g, t, single: gj.bordered_solve(
+            gj.bordered_factor(p, y, w, g, t[:-1], t[-1], single), t), static_argnums=5)
         X = y.reshape(problem.shape) * problem.x_scale
-        stab = jax.jit(stability)
-        F_static = _sweep.static_mesh_forces(system)
-        post = lambda p, X, w: _sweep.point_rows(  # noqa: E731
+        stab = jax.jit(gj.stability)
+        F_static = gj.static_mesh_forces(system)
+        post = lambda p, X, w: gj.responses_and_stability(  # noqa: E731
             p, jnp.stack([X] * 32), jnp.full(32, w), np.zeros(32, int), F_static)
         nv = 0 if problem.mesh_null is None else problem.mesh_null.shape[1]
         reduced = (problem.shape[1] - nv) * problem.shape[0]
@@ -189,13 +182,13 @@ def main() -> None:
     lu_s = machine_reference()
     for name, linear in runs:
         compiled = _compile_seconds[0]
-        first, result = (sweep(train, "first", args.f_from, args.f_to, linear=linear,
-                               points=args.points, max_points=args.max_points,
-                               progress=progress_printer(sys.stderr)) for _ in range(2))
+        first, result = (gj.sweep(train, "first", args.f_from, args.f_to, linear=linear,
+                                  points=args.points, max_points=args.max_points,
+                                  progress=gj.progress_printer(sys.stderr)) for _ in range(2))
         report(name, first, _compile_seconds[0] - compiled, result, lu_s)
         breakdown(train, result)
         gj.save_results(result.dataset, out / f"paper_{name}.nc")
-        plot_sweep(result.dataset, out / f"paper_{name}.png",
+        gj.plot_sweep(result.dataset, out / f"paper_{name}.png",
                    title=f"paper first gear, {name}")
 
 

@@ -36,7 +36,6 @@ the median. SciPy needs none.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import statistics
 import time
 import warnings
@@ -45,17 +44,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.integrate
+import xarray as xr
 
 import gearjax as gj
-from gearjax._studies import harmonics as _harmonics
-from gearjax._engine import hb as _hb
-from gearjax._studies import sweep as _sweep
-from gearjax._engine import time_domain as td
-from gearjax._engine.responses import mesh_responses
-from gearjax._gear.case import gear_case
-from gearjax._studies.verify import compare
 
-SETTINGS = td.TimeDomain()
+SETTINGS = gj.TimeDomain()
 
 
 def timed(fn, repeats: int):
@@ -77,16 +70,16 @@ def timed(fn, repeats: int):
 
 @jax.jit
 def _responses(problem, Xs, omegas, F_static):
-    return jax.vmap(mesh_responses, in_axes=(None, 0, 0, None))(problem, Xs, omegas, F_static)
+    return jax.vmap(gj.mesh_responses, in_axes=(None, 0, 0, None))(problem, Xs, omegas, F_static)
 
 
 def harmonic_balance(case, f_hz, repeats):
     omegas = case.omega(f_hz)
-    min_k = _harmonics.excitation_floor(case.system)
-    cutoff = _harmonics.response_cutoff_hz(case.system)
-    ks = np.array([_harmonics.harmonics_rule(f / case.mu_ref, min_k, cutoff_hz=cutoff)
+    min_k = gj.excitation_floor(case.system)
+    cutoff = gj.response_cutoff_hz(case.system)
+    ks = np.array([gj.harmonics_rule(f / case.mu_ref, min_k, cutoff_hz=cutoff)
                    for f in f_hz])
-    problems = {int(K): _hb.hb_problem(case.system, _hb.HarmonicBalance(n_harmonics=int(K)))
+    problems = {int(K): gj.hb_problem(case.system, gj.HarmonicBalance(n_harmonics=int(K)))
                 for K in np.unique(ks)}
     F_static = jnp.asarray(case.F_static)
 
@@ -97,18 +90,18 @@ def harmonic_balance(case, f_hz, repeats):
         ok = np.zeros(len(f_hz), bool)
         for K, problem in problems.items():
             idx = np.flatnonzero(ks == K)
-            sols = _sweep.solve_points(problem, jnp.asarray(omegas[idx]))
+            sols = gj.solve_hb_points(problem, jnp.asarray(omegas[idx]))
             ys = [sols.y[j] for j in range(len(idx))]
-            codes = np.asarray(sols.result).copy()
+            converged = np.asarray(sols.converged).copy()
             for j, i in enumerate(idx):
-                if codes[j] != _hb.CONVERGED and case.has_backlash:
-                    sol = _sweep.backlash_start(problem, omegas[i])
-                    ys[j], codes[j] = sol.y, int(sol.result)
+                if not converged[j] and case.has_backlash:
+                    sol = gj.backlash_start(problem, omegas[i])
+                    ys[j], converged[j] = sol.y, bool(sol.converged)
             Xs = jnp.stack(ys).reshape((-1,) + problem.shape) * problem.x_scale
             resp = _responses(problem, Xs, jnp.asarray(omegas[idx]), F_static)
-            a, b = jax.vmap(td.hb_initial_state)(Xs, jnp.asarray(omegas[idx]))
+            a, b = jax.vmap(gj.hb_initial_state)(Xs, jnp.asarray(omegas[idx]))
             rms[idx], x0[idx], v0[idx] = np.asarray(resp.rms_force), np.asarray(a), np.asarray(b)
-            ok[idx] = codes == _hb.CONVERGED
+            ok[idx] = converged
         return rms, ok, x0, v0
 
     (rms, ok, x0, v0), compile_s, run_s = timed(run, repeats)
@@ -121,10 +114,10 @@ def harmonic_balance(case, f_hz, repeats):
 
 def diffrax_points(case, f_hz, x0, v0, batch_size, repeats):
     omegas = jnp.asarray(case.omega(f_hz))
-    args = (case.system, omegas, x0, v0, SETTINGS, batch_size)
     # ahead-of-time compilation fills the jit cache: a full warm-up run would double the cost
     t0 = time.perf_counter()
-    td._simulate_points.lower(*args).compile()
+    gj.compile_simulate_points(case.system, omegas, x0=x0, v0=v0, settings=SETTINGS,
+                               batch_size=batch_size)
     compile_s = time.perf_counter() - t0
     times = []
     for _ in range(repeats):
@@ -136,20 +129,20 @@ def diffrax_points(case, f_hz, x0, v0, batch_size, repeats):
     F = np.asarray(tr.F)
     rms = np.sqrt(np.mean((F - F.mean(-1, keepdims=True)) ** 2, axis=-1))
     periods = np.asarray(tr.periods)
-    return {"rms": rms, "ok": np.asarray(tr.result) == td.PERIODIC, "compile_s": compile_s,
+    return {"rms": rms, "ok": np.asarray(tr.periodic), "compile_s": compile_s,
             "run_s": run_s, "periods": periods,
-            "steps_per_period": float(np.sum(tr.num_steps) / np.sum(periods))}
+            "steps_per_period": float(np.sum(tr.stats["num_steps"]) / np.sum(periods))}
 
 
 # ----------------------------------------------------------------------------- SciPy
 
 
 class NumpyModel:
-    """The right-hand side of ``_time_domain`` in NumPy, for SciPy.
+    """The right-hand side of :func:`gearjax.simulate` in NumPy, for SciPy.
 
     Built from the ``System`` fields (M, C, K, W, kbar, the truncated stiffness series
     k_cos / k_sin at h mu_m Omega, backlash, damping, f_mean) and the same state
-    scaling as the diffrax integrator (``td._scales``): ``tau = Omega t``,
+    scaling as the diffrax integrator (:func:`gearjax.state_scales`): ``tau = Omega t``,
     ``y = x / x_scale``, ``u = dy/dtau``. It restates ``gearjax.mesh_force`` for NumPy;
     the case has no transmission error, no torque ripple and damping in and out of
     contact (checked below), which this baseline does not implement.
@@ -159,7 +152,7 @@ class NumpyModel:
         s = system
         if s.te_cos.shape[-1] or s.forcing_mu or s.contact_damping:
             raise NotImplementedError("baseline without TE, ripple or contact damping")
-        length, xs = (np.asarray(a) for a in td._scales(s))
+        length, xs = (np.asarray(a) for a in gj.state_scales(s))
         self.n, self.omega, self.xs, self.length = s.n_dof, omega, xs, length
         self.rate_scale = length * max(tuple(s.mesh_mu) + (1,))
         self.M_inv = np.linalg.inv(np.asarray(s.M))
@@ -254,15 +247,14 @@ def agreement(a, b, stages, f_hz):
     both = a["ok"] & b["ok"]
     if not both.any():
         return 0, float("nan"), float("nan")
-    _, _, rel, _ = compare(_frame(a["rms"], both, stages), _frame(b["rms"], both, stages), 1.0)
+    _, _, rel, _ = gj.compare_rms(_frame(a["rms"], both, stages),
+                                  _frame(b["rms"], both, stages), 1.0)
     worst = np.unravel_index(np.nanargmax(rel), rel.shape)
     return int(both.sum()), float(np.nanmax(rel)), float(f_hz[worst[0]])
 
 
 def _frame(rms, ok, stages):
-    """The three variables of a results Dataset that ``compare`` reads."""
-    import xarray as xr
-
+    """The three variables of a results Dataset that :func:`gearjax.compare_rms` reads."""
     return xr.Dataset({"rms_force": (("point", "mesh"), rms), "converged": ("point", ok),
                        "stage": ("mesh", np.asarray(stages))})
 
@@ -289,7 +281,7 @@ def main() -> None:
     print("-" * len(header))
     agree_rows, missed = [], []
     for linear in (True, False):
-        case = gear_case(train, "first", None, linear)
+        case = gj.gear_case(train, "first", None, linear)
         label = "linear" if linear else "backlash"
         hb = harmonic_balance(case, f_hz, max(a.repeats, 3))
         x0, v0 = jnp.asarray(hb["x0"]), jnp.asarray(hb["v0"])

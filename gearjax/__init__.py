@@ -11,6 +11,7 @@ from ._engine import (
     bordered_solve as bordered_solve,
     BorderedFactors as BorderedFactors,
     Branch as Branch,
+    compile_simulate_points as compile_simulate_points,
     CondensedLU as CondensedLU,
     contact_state as contact_state,
     ContinuationSettings as ContinuationSettings,
@@ -54,8 +55,11 @@ from ._engine import (
     Stability as Stability,
     stability as stability,
     static_deflection as static_deflection,
+    state_scales as state_scales,
     static_mesh_forces as static_mesh_forces,
-    STOP_REASONS as STOP_REASONS,
+    RESULTS as RESULTS,
+    result_from_word as result_from_word,
+    result_word as result_word,
     System as System,
     system_from_matrices as system_from_matrices,
     SystemParameter as SystemParameter,
@@ -77,7 +81,12 @@ from ._errors import (
     TrainError as TrainError,
     TrainWarning as TrainWarning,
 )
-from ._studies.harmonics import TruncationWarning as TruncationWarning
+from ._studies.harmonics import (
+    TruncationWarning as TruncationWarning,
+    excitation_floor as excitation_floor,
+    harmonics_rule as harmonics_rule,
+    response_cutoff_hz as response_cutoff_hz,
+)
 from ._gear.kinematics import Kinematics as Kinematics, kinematics as kinematics
 from ._gear.phasing import (
     phasing_report as phasing_report,
@@ -103,7 +112,15 @@ from ._io.results import (
     sweep_dataset as sweep_dataset,
 )
 from ._studies.simulate import simulate_gear as simulate_gear
-from ._studies.sweep import SweepResult as SweepResult, sweep as sweep
+from ._studies.concurrency import threads as threads
+from ._studies.sweep import (
+    SweepResult as SweepResult,
+    backlash_start as backlash_start,
+    responses_and_stability as responses_and_stability,
+    progress_printer as progress_printer,
+    solve_hb_points as solve_hb_points,
+    sweep as sweep,
+)
 from ._studies.sensitivity import (
     BandSensitivity as BandSensitivity,
     Sensitivity as Sensitivity,
@@ -129,7 +146,11 @@ from ._gear.validate import (
     geometry_warnings as geometry_warnings,
     validate_train as validate_train,
 )
-from ._studies.verify import VerifyResult as VerifyResult, verify_gear as verify_gear
+from ._studies.verify import (
+    VerifyResult as VerifyResult,
+    compare_rms as compare_rms,
+    verify_gear as verify_gear,
+)
 
 from ._gear.paper import TABLE2_KHZ as TABLE2_KHZ, compare_table2 as compare_table2
 from ._gear.planet_sets import admissible_planet_sets as admissible_planet_sets

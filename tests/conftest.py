@@ -35,6 +35,14 @@ def paper_train():
 
 
 @pytest.fixture(scope="module")
+def paper_text():
+    """The bundled paper case's train file, as text."""
+    import gearjax as gj
+
+    return gj.bundled_example_path().read_text()
+
+
+@pytest.fixture(scope="module")
 def paper_system():
     """The assembled ``System`` of the bundled paper case's first gear (its geometry
     warning silenced)."""

@@ -171,18 +171,8 @@ def _notebook_code(path: pathlib.Path) -> str:
     return "\n".join(lines)
 
 
-PENDING = {"paper_sweep.py", "time_domain.py"}
-"""Benchmarks that still time private pieces (the sweep's post-processing, the integrator's
-ahead-of-time compilation and state scaling): strict, so the marker goes when they move."""
-
-
-def _with_pending(paths):
-    return [pytest.param(p, marks=pytest.mark.xfail(strict=True, reason="times private pieces"))
-            if p.name in PENDING else p for p in paths]
-
-
-@pytest.mark.parametrize("path", _with_pending(sorted((ROOT / "benchmarks").glob("*.py"))
-                                               + sorted((ROOT / "notebooks").glob("*.ipynb"))),
+@pytest.mark.parametrize("path", sorted((ROOT / "benchmarks").glob("*.py"))
+                         + sorted((ROOT / "notebooks").glob("*.ipynb")),
                          ids=lambda p: p.name)
 def test_benchmarks_and_notebooks_use_the_public_api(path):
     source = _notebook_code(path) if path.suffix == ".ipynb" else path.read_text()

@@ -8,7 +8,9 @@ from .adjoint import implicit_coefficients as implicit_coefficients
 from .aft import analysis as aft_analysis, synthesis as aft_synthesis
 from .bordered import Factors as BorderedFactors
 from .bordered import factor as bordered_factor, solve as bordered_solve
-from .continuation import STOP_REASONS as STOP_REASONS
+from .results import RESULTS as RESULTS
+from .results import result_from_word as result_from_word
+from .results import result_word as result_word
 from .continuation import AbstractParameter as AbstractParameter
 from .continuation import Branch as Branch
 from .continuation import FrequencyParameter as FrequencyParameter
@@ -55,9 +57,11 @@ from .static import static_deflection as static_deflection
 from .system import System as System
 from .system import system_from_matrices as system_from_matrices
 from .time_domain import TimeDomain as TimeDomain
+from .time_domain import compile_simulate_points as compile_simulate_points
 from .time_domain import Trajectory as Trajectory
 from .time_domain import contact_state as contact_state
 from .time_domain import hb_initial_state as hb_initial_state
 from .time_domain import simulate as simulate
 from .time_domain import simulate_points as simulate_points
 from .time_domain import simulate_sweep as simulate_sweep
+from .time_domain import state_scales as state_scales

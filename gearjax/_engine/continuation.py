@@ -30,9 +30,7 @@ from jaxtyping import Array
 from . import bordered as _bordered
 from . import corrector as _corrector
 from . import hb as _hb
-
-STOP_REASONS = ("reached_end", "max_points", "step_too_small", "nonfinite", "closed_loop")
-REACHED_END, MAX_POINTS, STEP_TOO_SMALL, STOP_NONFINITE = range(4)
+from .results import RESULTS
 
 
 class AbstractParameter(eqx.Module):
@@ -299,7 +297,9 @@ class Branch(eqx.Module):
     ``y`` ``(P, N)``: scaled unknowns; ``lam`` ``(P,)``; ``omega`` ``(P,)`` base
     frequency (rad/s); ``steps`` ``(P,)`` corrector iterations; ``fold`` ``(P,)``: a fold
     lies between this point and the previous one; ``fold_lam`` ``(P,)`` its location
-    (NaN elsewhere); ``stop``: why continuation ended (``STOP_REASONS``).
+    (NaN elsewhere); ``result``: why continuation ended, a
+    :class:`~gearjax._engine.results.RESULTS` item (``reached_end``, ``max_points``,
+    ``step_too_small``, ``nonfinite``, ``closed_loop``, or the one ``on_point`` gave).
     """
 
     y: np.ndarray
@@ -310,7 +310,7 @@ class Branch(eqx.Module):
     fold_lam: np.ndarray
     tangent: np.ndarray
     h: np.ndarray
-    stop: str = eqx.field(static=True)
+    result: RESULTS
 
 
 def distinct_folds(fold_lams, tol: float = 1e-3) -> np.ndarray:
@@ -334,9 +334,10 @@ def continue_compiled(param: AbstractParameter, y0, lam0, lam_end, settings: Set
                       max_points: int = 500):
     """The whole continuation as one compiled ``lax.while_loop`` (fixed buffers).
 
-    **Returns:** ``(ys (max_points, N), lams, folds, fold_lams, n_points, stop_code)``;
-    rows past ``n_points`` are padding. Suited to small systems (the clearance
-    oscillator benchmark), where per-step Python overhead would dominate.
+    **Returns:** ``(ys (max_points, N), lams, folds, fold_lams, n_points, result)``;
+    rows past ``n_points`` are padding; ``result`` as :attr:`Branch.result`. Suited to
+    small systems (the clearance oscillator benchmark), where per-step Python overhead
+    would dominate.
     """
     direction = jnp.sign(lam_end - lam0)
     state = start(param, y0, lam0, direction, settings)
@@ -347,8 +348,7 @@ def continue_compiled(param: AbstractParameter, y0, lam0, lam_end, settings: Set
     fold_lams = jnp.full((max_points,), jnp.nan)
 
     def cond(c):
-        st, _, _, _, _, n, code = c
-        return code < 0
+        return ~c[-1][0]
 
     def body(c):
         st, ys, lams, folds, fold_lams, n, _ = c
@@ -359,25 +359,29 @@ def continue_compiled(param: AbstractParameter, y0, lam0, lam_end, settings: Set
         fold_lams = jnp.where(new.accepted, fold_lams.at[n].set(new.fold_lam), fold_lams)
         n = n + new.accepted.astype(n.dtype)
         past = (new.lam - lam_end) * direction >= 0
-        code = jnp.where(
-            ~jnp.all(jnp.isfinite(new.y)), STOP_NONFINITE,
-            jnp.where(new.accepted & past, REACHED_END,
-                      jnp.where(n >= max_points, MAX_POINTS,
-                                jnp.where(new.h < settings.min_step, STEP_TOO_SMALL, -1))))
-        return new, ys, lams, folds, fold_lams, n, code
+        nonfinite = ~jnp.all(jnp.isfinite(new.y))
+        reached = new.accepted & past
+        full = n >= max_points
+        small = new.h < settings.min_step
+        result = RESULTS.where(
+            nonfinite, RESULTS.nonfinite,
+            RESULTS.where(reached, RESULTS.reached_end,
+                          RESULTS.where(full, RESULTS.max_points, RESULTS.step_too_small)))
+        return new, ys, lams, folds, fold_lams, n, (nonfinite | reached | full | small, result)
 
-    init = (state, ys, lams, folds, fold_lams, jnp.asarray(1), jnp.asarray(-1))
-    _, ys, lams, folds, fold_lams, n, code = jax.lax.while_loop(cond, body, init)
-    return ys, lams, folds, fold_lams, n, code
+    init = (state, ys, lams, folds, fold_lams, jnp.asarray(1),
+            (jnp.asarray(False), RESULTS.successful))
+    _, ys, lams, folds, fold_lams, n, (_, result) = jax.lax.while_loop(cond, body, init)
+    return ys, lams, folds, fold_lams, n, result
 
 
 def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Settings,
                     max_points: int = 2000, on_point: Callable | None = None,
                     state: ArcState | None = None) -> Branch:
     """Continuation driven from Python: one jitted step per call, ``on_point(i, state)``
-    after each accepted point (progress, journaling; a string it returns stops the
-    branch there with that reason). Keeps every point reached when it has to stop, with
-    the reason. ``state`` resumes from a saved state.
+    after each accepted point (progress, journaling; a ``RESULTS`` item it returns stops
+    the branch there with that result). Keeps every point reached when it has to stop,
+    with the reason. ``state`` resumes from a saved state.
 
     Stops with ``closed_loop`` when the branch comes back onto a stretch it has already
     traced, in the same direction (:func:`revisits`): with exact backlash the sampled
@@ -395,13 +399,13 @@ def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Setti
     trace.add(np.append(rows[0][0], rows[0][1]), rows[0][5])
     if on_point is not None:
         on_point(0, state)
-    stop = "max_points"
+    stop = RESULTS.max_points
     while len(rows) < max_points:
         new = step(param, state, settings)
         # a rejected attempt keeps the factors of the point it started from
         state = new if bool(new.accepted) else _replace(new, factors=state.factors)
         if not bool(jnp.all(jnp.isfinite(state.y))):
-            stop = "nonfinite"
+            stop = RESULTS.nonfinite
             break
         if bool(state.accepted):
             rows.append((np.asarray(state.y), float(state.lam), int(state.steps),
@@ -410,23 +414,23 @@ def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Setti
                          float(state.h)))
             asked = on_point(len(rows) - 1, state) if on_point is not None else None
             if (float(state.lam) - lam_end) * direction >= 0:
-                stop = "reached_end"
+                stop = RESULTS.reached_end
                 break
-            if asked:
+            if asked is not None:
                 stop = asked
                 break
             z = np.append(rows[-1][0], rows[-1][1])
             if trace.revisits(z, rows[-1][5]):
-                stop = "closed_loop"
+                stop = RESULTS.closed_loop
                 break
             trace.add(z, rows[-1][5])
         elif float(state.h) < settings.min_step:
-            stop = "step_too_small"
+            stop = RESULTS.step_too_small
             break
     y, lam, steps, fold, fold_lam, tan, h = (np.array(v) for v in zip(*rows))
     omegas = np.array([float(param.omega(l)) for l in lam])
     return Branch(y=np.stack(y), lam=lam, omega=omegas, steps=steps, fold=fold,
-                  fold_lam=fold_lam, tangent=np.stack(tan), h=h, stop=stop)
+                  fold_lam=fold_lam, tangent=np.stack(tan), h=h, result=stop)
 
 
 class Trace:

@@ -37,12 +37,10 @@ from jaxtyping import Array, Float
 
 from . import aft as _aft
 from .mesh_force import fourier_series, mesh_force
+from .results import RESULTS
 from .static import static_deflection
 from .system import System
 
-# result codes per solution point (kept in every output)
-RESULTS = ("converged", "max_steps", "nonfinite")
-CONVERGED, MAX_STEPS, NONFINITE = range(3)
 
 
 class HarmonicBalance(eqx.Module):
@@ -292,20 +290,22 @@ class HBSolution(eqx.Module):
     """One harmonic-balance point (:func:`gearjax._engine.newton.newton`).
 
     **Fields:** ``X`` ``(2K+1, n)``: coefficients (rad or m); ``y``: scaled unknowns,
-    flat; ``omega``: base frequency (rad/s); ``result``: code (``RESULTS``);
-    ``steps``: Newton iterations; ``residual_norm``: max scaled residual.
+    flat; ``omega``: base frequency (rad/s); ``result``: a :class:`RESULTS` item
+    (``successful``, ``nonlinear_max_steps_reached`` or ``nonfinite``); ``stats``:
+    ``num_steps`` (Newton iterations) and ``residual_norm`` (max scaled residual).
+    Batched where the solver was vmapped.
     """
 
     X: Array
     y: Array
     omega: Array
-    result: Array
-    steps: Array
-    residual_norm: Array
+    result: RESULTS
+    stats: dict
 
     @property
     def converged(self):
-        return self.result == CONVERGED
+        """Whether the point converged (a boolean array)."""
+        return self.result == RESULTS.successful
 
 
 def linear_guess(problem: HBProblem, omega) -> Array:

@@ -7,8 +7,8 @@ lineax solver on an operator built from the iterate (for the harmonic balance
 start. Its test: the scaled step below ``rtol max(1, max |y|)`` and the residual below
 ``sqrt(rtol)`` (max norms), both at the iterate the step is taken from; the step is
 taken either way. A non-finite step stops the iteration at the last finite iterate.
-Results map onto :data:`gearjax._engine.hb.RESULTS`: ``successful`` is ``converged``,
-``nonlinear_max_steps_reached`` ``max_steps`` and ``nonfinite`` ``nonfinite``.
+Results are optimistix's, promoted into :class:`gearjax._engine.results.RESULTS`:
+``successful``, ``nonlinear_max_steps_reached`` or ``nonfinite``.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from jaxtyping import Array
 
 from . import hb as _hb
 from .linear_solver import CondensedLU, HBJacobian
+from .results import RESULTS
 
 
 class _NewtonState(eqx.Module):
@@ -107,12 +108,10 @@ def _iterate(problem: _hb.HBProblem, omega, y0: Array, chord: bool) -> _hb.HBSol
     sol = optx.root_find(_residual, solver, y0, (problem, omega), max_steps=settings.max_steps,
                          throw=False)
     y = sol.value
-    result = jnp.where(sol.result == optx.RESULTS.nonfinite, _hb.NONFINITE,
-                       jnp.where(sol.result == optx.RESULTS.successful, _hb.CONVERGED,
-                                 _hb.MAX_STEPS))
     norm = jnp.max(jnp.abs(_hb.residual(problem, y, omega)))
     return _hb.HBSolution(X=y.reshape(problem.shape) * problem.x_scale, y=y, omega=omega,
-                          result=result, steps=sol.stats["num_steps"], residual_norm=norm)
+                          result=RESULTS.promote(sol.result),
+                          stats={"num_steps": sol.stats["num_steps"], "residual_norm": norm})
 
 
 def newton(problem: _hb.HBProblem, omega, y0: Array) -> _hb.HBSolution:
@@ -120,8 +119,9 @@ def newton(problem: _hb.HBProblem, omega, y0: Array) -> _hb.HBSolution:
     ``(N,)`` (jit-compatible).
 
     Stops when the scaled step and residual are below ``problem.settings.rtol``
-    (``converged``), after ``settings.max_steps`` (``max_steps``), or on a non-finite
-    value, keeping the last finite iterate (``nonfinite``): never NaN silently. Each
+    (``RESULTS.successful``), after ``settings.max_steps``
+    (``nonlinear_max_steps_reached``), or on a non-finite value, keeping the last finite
+    iterate (``nonfinite``): never NaN silently. Each
     step factorises the Jacobian condensed to the motions that deflect a mesh
     (:class:`~gearjax._engine.linear_solver.CondensedLU`).
     """
@@ -140,7 +140,7 @@ def solve_linear(problem: _hb.HBProblem, omega, y0: Array | None = None) -> _hb.
     same everywhere: it is factorised once (at ``y0``, default
     :func:`~gearjax._engine.hb.linear_guess`) and every step is a solve with those
     factors (the chord method). The first step is exact up to round-off; the next ones
-    refine it and apply :func:`newton`'s test and result codes. The caller guarantees
+    refine it and apply :func:`newton`'s test and results. The caller guarantees
     zero backlash (with backlash this is a chord iteration from ``y0``).
     """
     omega = jnp.asarray(omega, dtype=float)

@@ -54,12 +54,10 @@ from jaxtyping import Array, Float, Int
 
 from .._config import require_x64
 from .mesh_force import fourier_series, mesh_force
+from .results import RESULTS
 from .static import static_deflection
 from .system import System
 
-# result codes per trajectory (kept in every output)
-RESULTS = ("periodic", "not_periodic", "max_steps", "solver_failed", "nonfinite")
-PERIODIC, NOT_PERIODIC, MAX_STEPS, SOLVER_FAILED, NONFINITE = range(5)
 
 
 class TimeDomain(eqx.Module):
@@ -127,13 +125,15 @@ class Trajectory(eqx.Module):
     - ``F`` ``(m, T)``: mesh forces (N), from ``mesh_force``;
     - ``x_end``, ``v_end`` ``(n,)``: the state after the last period (at phase 0 of
       the excitation), where a sweep continues;
-    - ``result``: code, see ``RESULTS``; ``periods``: base periods integrated;
+    - ``result``: a :class:`~gearjax._engine.results.RESULTS` item: ``successful``
+      (periodic with the base period), ``not_periodic``, ``max_steps_reached``,
+      ``solver_failed`` or ``nonfinite``; ``periods``: base periods integrated;
       ``period``: the period found in base periods (1 when periodic;
       ``2..max_subharmonic`` a sub-harmonic; 0 none: quasi-periodic, chaotic or still transient);
       ``distance`` ``(max_subharmonic,)``: change of the Poincare point over
       ``1..max_subharmonic`` periods at the last check (scaled, see
-      ``TimeDomain.periodic_tol``); ``num_steps``, ``num_rejected``: accepted and
-      rejected solver steps in all.
+      ``TimeDomain.periodic_tol``); ``stats``: ``num_steps``, ``num_rejected``:
+      accepted and rejected solver steps in all.
     """
 
     omega: Float[Array, ""]
@@ -145,24 +145,35 @@ class Trajectory(eqx.Module):
     F: Float[Array, "m T"]
     x_end: Float[Array, " n"]
     v_end: Float[Array, " n"]
-    result: Int[Array, ""]
+    result: RESULTS
     periods: Int[Array, ""]
     period: Int[Array, ""]
     distance: Float[Array, " Q"]
-    num_steps: Int[Array, ""]
-    num_rejected: Int[Array, ""]
+    stats: dict
 
     @property
     def periodic(self):
-        return self.result == PERIODIC
+        """Whether the trajectory settled with the base period (a boolean array)."""
+        return self.result == RESULTS.successful
+
+    @property
+    def integrated(self):
+        """Whether the integration ran its periods, periodic or not (a boolean array):
+        false where the solver failed, whose samples are stale."""
+        return (self.result == RESULTS.successful) | (self.result == RESULTS.not_periodic)
 
 
 # ------------------------------------------------------------------------ the model
 
 
-def _scales(system: System):
-    """Characteristic mesh length (m) and coordinate scale ``(n,)``: as the harmonic balance
-    (1 and ones, SI units, for a system without meshes)."""
+def state_scales(system: System):
+    """The scaling of the integration state: ``(length, x_scale)``.
+
+    ``length`` (m, scalar): the characteristic mesh length, the largest of the backlash
+    and the static mesh deflections; ``x_scale`` ``(n,)`` (rad or m): per coordinate, the
+    motion that deflects a mesh by ``length``, as the harmonic balance's. The integrator's
+    state is ``y = x / x_scale`` and ``dy/dtau`` with ``tau = Omega t`` (module
+    docstring). A system without meshes gets ``1`` and ones (SI units)."""
     if not system.n_meshes:
         return jnp.asarray(1.0), jnp.ones(system.n_dof)
     _, F_static = static_deflection(system)
@@ -208,7 +219,7 @@ class _Problem(eqx.Module):
 
 
 def _problem(system: System) -> _Problem:
-    length, x_scale = _scales(system)
+    length, x_scale = state_scales(system)
     top = max(tuple(system.mesh_mu) + tuple(system.forcing_mu) + (1,))
     return _Problem(system=system, Minv=jnp.linalg.inv(system.M), K=system.K, x_scale=x_scale,
                     length=length, rate_scale=length * top)
@@ -316,10 +327,12 @@ def _steady_state(problem: _Problem, omega, x0, v0, settings: TimeDomain) -> Tra
         found = (streak >= q) & ((q == 1) | apart)
         period = jnp.where(jnp.any(found), jnp.argmax(found) + 1, 0)
         k_new = k + 1
-        code = jnp.where(~ok, jnp.where(sol.result == dfx.RESULTS.max_steps_reached,
-                                        MAX_STEPS, SOLVER_FAILED),
-                         jnp.where(~finite, NONFINITE,
-                                   jnp.where(period == 1, PERIODIC, NOT_PERIODIC)))
+        code = RESULTS.where(
+            ~ok, RESULTS.where(sol.result == dfx.RESULTS.max_steps_reached,
+                               RESULTS.max_steps_reached, RESULTS.solver_failed),
+            RESULTS.where(~finite, RESULTS.nonfinite,
+                          RESULTS.where(period == 1, RESULTS.successful,
+                                        RESULTS.not_periodic)))
         done = ~good | (((period > 0) & (k_new >= P)) | (k_new >= max(settings.max_periods, P)))
         samples = jnp.concatenate([state["samples"][N:], sol.ys[:N]], axis=0)
         last = jnp.where((d < settings.periodic_tol) & apart, q, Q + 1)
@@ -346,7 +359,7 @@ def _steady_state(problem: _Problem, omega, x0, v0, settings: TimeDomain) -> Tra
         streak=jnp.zeros(Q, dtype=int),
         samples=jnp.zeros((P * N, 2 * n)),
         done=jnp.asarray(False),
-        code=jnp.asarray(NOT_PERIODIC),
+        code=RESULTS.not_periodic,
         period=jnp.asarray(0),
         distance=jnp.full(Q, jnp.inf),
         steps=jnp.asarray(0),
@@ -369,8 +382,8 @@ def _steady_state(problem: _Problem, omega, x0, v0, settings: TimeDomain) -> Tra
                       x_end=problem.x_scale * z_end[:n],
                       v_end=omega * problem.x_scale * z_end[n:],
                       result=state["code"], periods=k, period=state["period"],
-                      distance=state["distance"], num_steps=state["steps"],
-                      num_rejected=state["rejected"])
+                      distance=state["distance"],
+                      stats={"num_steps": state["steps"], "num_rejected": state["rejected"]})
 
 
 # ------------------------------------------------------------------------ public API
@@ -392,10 +405,10 @@ def simulate(system: System, omega, *, x0=None, v0=None,
     harmonic-balance solution) or, when ``x0`` is None, from the static solution in
     contact (:func:`contact_state`), then integrates whole base periods
     ``2 pi / omega`` until the mesh deflections and rates repeat after one period
-    (``periodic``), repeat after ``2..max_subharmonic`` periods over a whole cycle
+    (``RESULTS.successful``), repeat after ``2..max_subharmonic`` periods over a whole cycle
     (``not_periodic`` with ``period`` set), or ``max_periods`` pass (``not_periodic``,
     ``period`` the shortest near-repetition at the last check or 0). Solver failure is
-    a result code, never an exception. jit-compiled; vmap it or use
+    a result, never an exception. jit-compiled; vmap it or use
     :func:`simulate_points` and :func:`simulate_sweep` for many frequencies.
 
     **Arguments:** ``system``: the :class:`System`; ``omega``: base frequency Omega
@@ -431,6 +444,20 @@ def simulate_points(system: System, omegas, *, x0=None, v0=None,
     on every field.
     """
     return _simulate_points(system, *_arrays(omegas, x0, v0), settings, batch_size)
+
+
+def compile_simulate_points(system: System, omegas, *, x0=None, v0=None,
+                            settings: TimeDomain = TimeDomain(), batch_size: int | None = None):
+    """Compile :func:`simulate_points` for these arguments ahead of time, without running it.
+
+    Arguments as :func:`simulate_points`; only their shapes, types and the static
+    ``settings`` and ``batch_size`` matter. Time this to separate compilation from
+    integration.
+
+    **Returns:** the compiled program (``jax.stages.Compiled``).
+    """
+    return _simulate_points.lower(system, *_arrays(omegas, x0, v0), settings,
+                                  batch_size).compile()
 
 
 @eqx.filter_jit
@@ -475,7 +502,7 @@ def _simulate_sweep(system, omegas, x0, v0, settings):
         def step(carry, w):
             xa, va = carry
             tr = _steady_state(problem, w, xa, va, settings)
-            ok = tr.result <= NOT_PERIODIC
+            ok = tr.integrated
             return (jnp.where(ok, tr.x_end, xa), jnp.where(ok, tr.v_end, va)), tr
 
         _, out = jax.lax.scan(step, (a, b), ws)

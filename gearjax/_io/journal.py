@@ -371,39 +371,42 @@ class Writer:
 
     @classmethod
     def create(cls, path, head: Mapping) -> Writer:
+        def start(writer: Writer) -> None:
+            writer.append(head)
+            sync_directory(writer.path)
+
+        return cls._open_locked(path, "wb", start)
+
+    @classmethod
+    def append_to(cls, path, size: int) -> Writer:
+        def start(writer: Writer) -> None:
+            writer._file.truncate(size)
+            writer._file.seek(size)
+            os.fsync(writer._file.fileno())
+
+        return cls._open_locked(path, "r+b", start)
+
+    @classmethod
+    def _open_locked(cls, path, mode: str, start: Callable[[Writer], None]) -> Writer:
+        """:func:`lock` the journal ``path``, open it in ``mode`` and ``start`` the writer
+        on it; the lock is given back when any step fails.
+
+        **Raises:** :class:`JournalBusy` as :func:`lock`; ``TrainError`` naming the file
+        when it cannot be opened; whatever ``start`` raises."""
         path = pathlib.Path(path)
         held = lock(path)
         try:
             try:
-                file = open(path, "wb")
+                file = open(path, mode)
             except OSError as e:
                 raise fail(str(path), "journal", None,
                            f"cannot be written ({e.strerror or e})") from None
             writer = cls(path, file, held)
-            writer.append(head)
-            sync_directory(path)
+            start(writer)
         except BaseException:
             held.release()
             raise
         return writer
-
-    @classmethod
-    def append_to(cls, path, size: int) -> Writer:
-        path = pathlib.Path(path)
-        held = lock(path)
-        try:
-            try:
-                file = open(path, "r+b")
-            except OSError as e:
-                raise fail(str(path), "journal", None,
-                           f"cannot be written ({e.strerror or e})") from None
-            file.truncate(size)
-            file.seek(size)
-            os.fsync(file.fileno())
-        except BaseException:
-            held.release()
-            raise
-        return cls(path, file, held)
 
     def append(self, record: Mapping) -> None:
         self._file.write(encode(record))

@@ -126,7 +126,8 @@ def sweep_dataset(
       (:func:`mesh_coordinates` gives all five from a ``System``);
     - ``mesh_frequency_hz`` ``(P,)`` (Hz, reference stage), ``stage_mesh_frequency_hz``
       ``(P, S)`` (Hz), ``input_rpm`` ``(P,)`` (rpm), ``omega`` ``(P,)`` (rad/s);
-    - ``result``: ``P`` result codes (``"converged"``, ``"max_steps"``, ...);
+    - ``result``: ``P`` result words (``"converged"``, ``"max_steps"``, ...:
+      :func:`gearjax.result_word`);
     - ``converged``: ``(P,)`` bool (default: ``result == "converged"``);
     - ``stable``: ``(P,)`` of bool, or of float with NaN / ``None`` for unknown; ``None``:
       all unknown. Stored as int8 (1, 0, -1 unknown);

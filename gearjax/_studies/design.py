@@ -66,6 +66,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from jaxtyping import Array, Float
 
 from .._engine import hb as _hb
+from .._engine.results import RESULTS, result_word
 from .._engine.adjoint import implicit_coefficients
 from .._engine.newton import solve_hb
 from .._engine.responses import mesh_responses, static_mesh_forces
@@ -82,16 +83,17 @@ SOLVERS = ("auto", "linear", "newton")
 
 
 def linear_solve(problem: _hb.HBProblem, omega) -> tuple[Array, Array]:
-    """``(X, result code)``: the harmonic balance of a system without backlash in one
-    factorisation, ``y = -J^-1 R(0)`` (scaled unknowns, flat ``(N,)``), as coefficients
-    ``X = y x_scale`` ``(2K+1, n)``.
+    """``(X, result)`` (a ``RESULTS`` item): the harmonic balance of a system without
+    backlash in one factorisation, ``y = -J^-1 R(0)`` (scaled unknowns, flat ``(N,)``), as
+    coefficients ``X = y x_scale`` ``(2K+1, n)``.
 
     Exact when the residual is affine in ``y`` (no backlash, no contact-only damping):
     one Newton step ``y = y0 - J(y0)^-1 R(y0)`` from any ``y0``. The step starts from a
     fixed, nowhere-special ``y0`` (not 0: at a zero deflection the clearance function
     ``p - clip(p, -b, b)`` with ``b = 0`` sits on its kink, where autodiff gives a
-    one-sided slope). The code is ``max_steps`` when the residual at ``y`` is not below
-    Newton's test (``sqrt(rtol)``), ``nonfinite`` on a non-finite solution.
+    one-sided slope). The result is ``nonlinear_max_steps_reached`` when the residual at
+    ``y`` is not below Newton's test (``sqrt(rtol)``), ``nonfinite`` on a non-finite
+    solution.
     Differentiable: the solve is a plain ``jnp.linalg.solve``.
     """
     omega = jnp.asarray(omega, dtype=float)
@@ -99,13 +101,14 @@ def linear_solve(problem: _hb.HBProblem, omega) -> tuple[Array, Array]:
     y = y0 - jnp.linalg.solve(_hb.jacobian(problem, y0, omega), _hb.residual(problem, y0, omega))
     norm = jnp.max(jnp.abs(_hb.residual(problem, y, omega)))
     ok = norm <= jnp.sqrt(problem.settings.rtol)
-    code = jnp.where(~jnp.all(jnp.isfinite(y)), _hb.NONFINITE,
-                     jnp.where(ok, _hb.CONVERGED, _hb.MAX_STEPS))
+    code = RESULTS.where(~jnp.all(jnp.isfinite(y)), RESULTS.nonfinite,
+                         RESULTS.where(ok, RESULTS.successful,
+                                       RESULTS.nonlinear_max_steps_reached))
     return y.reshape(problem.shape) * problem.x_scale, code
 
 
 def newton_solve(problem: _hb.HBProblem, omega) -> tuple[Array, Array]:
-    """``(X, result code)`` by :func:`gearjax._engine.newton.solve_hb` from the linear,
+    """``(X, result)`` by :func:`gearjax._engine.newton.solve_hb` from the linear,
     in-contact guess, as coefficients ``X`` ``(2K+1, n)``; differentiable: the Newton
     iterations see stop-gradient inputs and the derivative is the implicit one
     (:func:`gearjax._engine.adjoint.implicit_coefficients`)."""
@@ -228,8 +231,8 @@ def batched_rms(family, thetas, omegas, settings: _hb.HarmonicBalance, *,
     ``memory_bytes``: bound on the points in flight per device (:func:`chunks`: the rest
     run in sequence inside the same compiled call).
 
-    **Returns:** ``(rms, result)``: ``(B, F, m)`` RMS forces (N) and ``(B, F)`` result
-    codes (:data:`gearjax._engine.hb.RESULTS`). Differentiable in ``thetas`` when
+    **Returns:** ``(rms, result)``: ``(B, F, m)`` RMS forces (N) and a ``(B, F)``
+    batched :class:`~gearjax._engine.results.RESULTS` item. Differentiable in ``thetas`` when
     unsharded.
     """
     if solver not in ("linear", "newton"):
@@ -258,7 +261,7 @@ def batched_rms(family, thetas, omegas, settings: _hb.HarmonicBalance, *,
         # run one on a pool with fewer workers than devices wait on each other forever
         batches = (1, 1)
     rms, code = _design_sharded(family, sharded, omegas, settings, solver, mesh, batches)
-    return rms[:B], code[:B]
+    return rms[:B], jax.tree.map(lambda a: a[:B], code)
 
 
 # ------------------------------------------------------------------------ gear level
@@ -271,7 +274,8 @@ class DesignSweep:
     **Fields:** ``paths`` (TOML paths), ``thetas`` ``(B, p)`` (file units);
     ``frequencies_hz`` ``(F,)`` (reference-stage mesh frequency), ``omega`` ``(F,)``
     (rad/s); ``rms_force`` ``(B, F, m)`` (N; NaN where a point failed); ``result``
-    ``(B, F)`` codes; ``converged`` ``(B, F)``; ``peak`` ``(B,)``: the largest RMS over
+    ``(B, F)`` words (:func:`~gearjax._engine.results.result_word`); ``converged``
+    ``(B, F)``; ``peak`` ``(B,)``: the largest RMS over
     converged points and meshes (N); ``meshes`` (names); ``gear``, ``reference_stage``,
     ``harmonics``, ``linear``, ``solver``, ``devices`` (how many the designs were
     spread over).
@@ -342,8 +346,7 @@ def design_sweep(
     settings = _hb.HarmonicBalance(n_harmonics=int(harmonics))
     omegas = case.omega(f)
     rms, code = batched_rms(family, th, omegas, settings, solver=solver, devices=devices)
-    rms, code = np.asarray(rms), np.asarray(code)
-    ok = code == _hb.CONVERGED
+    rms, ok, code = np.asarray(rms), np.asarray(code == RESULTS.successful), result_word(code)
     rms = np.where(ok[..., None], rms, np.nan)
     n_dev = 1 if devices is None else (devices.size if isinstance(devices, Mesh)
                                        else len(list(devices)))

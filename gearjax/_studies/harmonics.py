@@ -235,7 +235,7 @@ def truncation_change(problem: _hb.HBProblem, wide: _hb.HBProblem, y, omega,
     y2 = np.zeros(wide.shape)
     y2[:C] = np.asarray(y).reshape(C, n)
     sol = newton_jit(wide, jnp.asarray(omega, float), jnp.asarray(y2.reshape(-1)))
-    if int(sol.result) != _hb.CONVERGED:
+    if not bool(sol.converged):
         return math.inf
     X = jnp.asarray(np.asarray(y).reshape(C, n)) * problem.x_scale
     a = np.asarray(mesh_responses(problem, X, omega, F_static).rms_force)

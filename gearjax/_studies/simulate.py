@@ -34,6 +34,7 @@ import numpy as np
 from .._engine import time_domain as td
 from .._errors import bad_argument
 from .._engine.responses import responses_from_samples
+from .._engine.results import result_word
 from .._io.results import sweep_dataset
 from .._gear.case import GearCase, gear_case
 from .._gear.toml_io import dumps_train
@@ -41,10 +42,6 @@ from .._gear.train import Train
 
 DEFAULT_SWEEP_POINTS = 20
 """Points of a ``from_hz``/``to_hz`` sweep when ``points`` is not given."""
-
-RESULT_NAMES = ("converged",) + td.RESULTS[1:]
-"""Result code names of a simulated point (``periodic`` reported as ``converged``)."""
-
 
 def frequency_points(at_hz: Sequence[float] | None = None, from_hz: float | None = None,
                      to_hz: float | None = None, points: int | None = None
@@ -112,13 +109,12 @@ def trajectory_dataset(case: GearCase, f_hz, tr: td.Trajectory, solver: dict | N
     period in base periods (0: none found).
     """
     s = case.system
-    codes = np.asarray(tr.result)
     resp = responses_from_samples(tr.p, tr.F, s.backlash, case.F_static, s.mesh_radius)
-    failed = codes > td.NOT_PERIODIC  # samples of a failed point are stale: no values
+    failed = ~np.asarray(tr.integrated)  # samples of a failed point are stale: no values
     resp = jax.tree.map(lambda a: np.where(failed[:, None], np.nan, np.asarray(a)), resp)
     ds = sweep_dataset(
         resp, **case.point_coordinates(f_hz),
-        result=[RESULT_NAMES[c] for c in codes],
+        result=list(result_word(tr.result)),
         stable=None,
         period=np.asarray(tr.period),
         static_force=case.F_static,
@@ -129,8 +125,8 @@ def trajectory_dataset(case: GearCase, f_hz, tr: td.Trajectory, solver: dict | N
     )
     for name, value, long_name in (
             ("periods", tr.periods, "base periods integrated"),
-            ("num_steps", tr.num_steps, "accepted solver steps"),
-            ("num_rejected", tr.num_rejected, "rejected solver steps")):
+            ("num_steps", tr.stats["num_steps"], "accepted solver steps"),
+            ("num_rejected", tr.stats["num_rejected"], "rejected solver steps")):
         ds[name] = ("point", np.asarray(value), {"units": "1", "long_name": long_name})
     return ds
 

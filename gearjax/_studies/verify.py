@@ -41,6 +41,7 @@ import numpy as np
 from . import harmonics as _harmonics
 from .._engine import hb as _hb
 from .._engine import time_domain as td
+from .._engine.results import RESULTS, result_word
 from .._errors import bad_argument
 from .._io.results import sweep_dataset
 from .._gear.case import GearCase, gear_case
@@ -132,7 +133,7 @@ def verify_gear(
     omegas = case.omega(f_hz)
     x0, v0 = jax.vmap(td.hb_initial_state)(jnp.asarray(hb["X"]), jnp.asarray(omegas))
     x_static, _ = td.contact_state(case.system)
-    good = hb["result"] == _hb.CONVERGED
+    good = hb["result"] == result_word(RESULTS.successful)
     x0 = jnp.where(good[:, None], x0, x_static[None, :])
     v0 = jnp.where(good[:, None], v0, 0.0)
     tr = integrate(case, f_hz, False, x0, v0, settings, batch_size)
@@ -145,7 +146,7 @@ def verify_gear(
     common = {"command": "" if command is None else command, "mode": solver["mode"]}
     hb_ds = sweep_dataset(
         hb["responses"], **case.point_coordinates(f_hz),
-        result=[_hb.RESULTS[c] for c in hb["result"]],
+        result=list(hb["result"]),
         stable=hb["stable"],
         static_force=case.F_static,
         train_toml=dumps_train(case.train),
@@ -157,17 +158,24 @@ def verify_gear(
                                                      "long_name": "solution harmonics K"})
     ni_ds = trajectory_dataset(case, f_hz, tr, {**solver_settings(settings), **solver},
                                attrs={"start": "harmonic balance", "seconds": t_ni, **common})
-    rms_hb, rms_ni, rel, ok = compare(hb_ds, ni_ds, tolerance)
+    rms_hb, rms_ni, rel, ok = compare_rms(hb_ds, ni_ds, tolerance)
     return VerifyResult(hb=hb_ds, ni=ni_ds, rms_hb=rms_hb, rms_ni=rms_ni, rel_diff=rel, ok=ok,
                         tolerance=tolerance,
                         seconds={"harmonic_balance": t_hb, "integration": t_ni,
                                  "total": time.perf_counter() - t0})
 
 
-def compare(hb_ds, ni_ds, tolerance: float):
-    """``(rms_hb, rms_ni, rel_diff, ok)``, each ``(P, m)``, of two results Datasets at
-    the same points (``rel_diff`` relative to the largest ``rms_hb`` of the mesh's stage;
-    module docstring)."""
+def compare_rms(hb_ds, ni_ds, tolerance: float):
+    """RMS mesh forces of two methods at the same ``P`` points and ``m`` meshes, compared.
+
+    **Arguments:** ``hb_ds``, ``ni_ds``: results Datasets (or any Datasets with
+    ``rms_force`` ``(point, mesh)`` in N and ``converged`` ``(point,)``; ``hb_ds`` also
+    ``stage`` ``(mesh,)``); ``tolerance``: the largest accepted ``rel_diff``.
+
+    **Returns:** ``(rms_hb, rms_ni, rel_diff, ok)``, each ``(P, m)``: ``rel_diff =
+    |rms_ni - rms_hb|`` relative to the largest ``rms_hb`` of the mesh's stage at that
+    point (module docstring), NaN where either method did not converge; ``ok``: both
+    converged and ``rel_diff <= tolerance``."""
     rms_hb = np.asarray(hb_ds["rms_force"].values, dtype=float)
     rms_ni = np.asarray(ni_ds["rms_force"].values, dtype=float)
     both = (np.asarray(hb_ds["converged"].values) & np.asarray(ni_ds["converged"].values))
@@ -199,8 +207,8 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
     start each point from the previous converged one (a sweep).
 
     **Returns:** a dict of per-point arrays: ``X`` ``(P, 2Kmax+1, n)`` (coefficients
-    zero-padded to the largest K), ``harmonics`` ``(P,)``, ``result`` ``(P,)`` codes
-    (``_hb.RESULTS``), ``stable`` ``(P,)`` bool, and ``responses``
+    zero-padded to the largest K), ``harmonics`` ``(P,)``, ``result`` ``(P,)`` words
+    (:func:`~gearjax._engine.results.result_word`), ``stable`` ``(P,)`` bool, and ``responses``
     (:class:`~gearjax.MeshResponses`, fields ``(P, m)``; NaN where not converged).
     """
     f_hz = np.asarray(f_hz, dtype=float)
@@ -216,7 +224,8 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
         _harmonics.require_size(case.system, int(K), mu=case.mu)
     P, n, K_max = len(f_hz), case.system.n_dof, int(ks.max())
     X = np.zeros((P, 2 * K_max + 1, n))
-    result = np.full(P, _hb.MAX_STEPS)
+    converged = result_word(RESULTS.successful)
+    result = np.full(P, result_word(RESULTS.nonlinear_max_steps_reached), dtype=object)
     stable = np.zeros(P, dtype=bool)
     rows = [None] * P
     problems = {int(K): _hb.hb_problem(case.system, _hb.HarmonicBalance(n_harmonics=int(K)))
@@ -226,26 +235,26 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
         previous = None
         for i in range(P):
             problem = problems[int(ks[i])]
-            y, code = None, _hb.MAX_STEPS
+            y, code = None, RESULTS.nonlinear_max_steps_reached
             if previous is not None:
                 sol = newton(problem, jnp.asarray(omegas[i]),
                              resize_harmonics(*previous, problem))
-                y, code = sol.y, int(sol.result)
-            if code != _hb.CONVERGED:
+                y, code = sol.y, sol.result
+            if not bool(code == RESULTS.successful):
                 y, code = start_point(problem, omegas[i])
-            ys[i], result[i] = y, code
-            if code == _hb.CONVERGED:
+            ys[i], result[i] = y, result_word(code)
+            if result[i] == converged:
                 previous = (y, int(ks[i]))
     else:
         for K, problem in problems.items():
             idx = np.flatnonzero(ks == K)
             sols = solve_points(problem, jnp.asarray(omegas[idx]))
-            codes = np.asarray(sols.result)
+            words = result_word(sols.result)
             for j, i in enumerate(idx):
-                ys[i], result[i] = sols.y[j], int(codes[j])
-                if codes[j] != _hb.CONVERGED and case.has_backlash:
+                ys[i], result[i] = sols.y[j], words[j]
+                if words[j] != converged and case.has_backlash:
                     sol = backlash_start(problem, omegas[i])
-                    ys[i], result[i] = sol.y, int(sol.result)
+                    ys[i], result[i] = sol.y, result_word(sol.result)
     for K, problem in problems.items():
         idx = np.flatnonzero(ks == K)
         Xs = jnp.stack([ys[i] for i in idx]).reshape((-1,) + problem.shape) * problem.x_scale
@@ -256,7 +265,8 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
             stable[i] = bool(post["stable"][j])
             rows[i] = jax.tree.map(lambda a: np.asarray(a[j]), post["responses"])
     responses = jax.tree.map(lambda *a: np.stack(a), *rows)
-    failed = result != _hb.CONVERGED
+    result = result.astype(str)
+    failed = result != converged
     responses = jax.tree.map(lambda a: np.where(failed[:, None], np.nan, a), responses)
     return {"X": X, "harmonics": ks, "result": result, "stable": np.where(failed, np.nan,
                                                                            stable),

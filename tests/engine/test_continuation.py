@@ -13,6 +13,7 @@ from gearjax._engine import continuation as C
 from gearjax._engine import corrector as _corrector
 from gearjax._engine import hb as _hb
 from gearjax._engine import newton as _newton
+from gearjax._engine.results import RESULTS
 
 K, T = 15, 256
 
@@ -33,7 +34,7 @@ def branch():
     n = int(n)
     X = np.asarray(ys[:n]).reshape(n, 2 * K + 1, 1) * np.asarray(problem.x_scale)
     x = np.asarray(jax.vmap(lambda c: _aft.synthesis(c, T))(jnp.asarray(X)))[..., 0]
-    return {"lam": np.asarray(lams[:n]), "amp": (x.max(1) - x.min(1)) / 2, "code": int(code),
+    return {"lam": np.asarray(lams[:n]), "amp": (x.max(1) - x.min(1)) / 2, "code": code,
             "folds": C.distinct_folds(np.asarray(fold_lams[:n])[np.asarray(folds[:n])]),
             "problem": problem, "param": param, "settings": settings, "y0": y0}
 
@@ -51,7 +52,7 @@ def ivp_amplitude(omega, z0, periods=80):
 
 
 def test_reaches_the_end_through_both_folds(branch):
-    assert C.STOP_REASONS[branch["code"]] == "reached_end"
+    assert bool(branch["code"] == RESULTS.reached_end)
     assert branch["lam"][-1] >= 1.5
     # pyHarm and NLvib put the folds near 0.852 and 0.6365 (issue 3)
     folds = np.sort(branch["folds"])
@@ -84,7 +85,7 @@ def test_python_driver_matches_and_compiles_once(branch):
     b2 = C.continue_branch(branch["param"], _newton.solve_hb(problem, 0.55).y, 0.55, 0.62, settings,
                            max_points=50)
     assert C._arclength_step_jit._cache_size() == n_before  # same shapes: no recompilation
-    assert b1.stop == "reached_end" and b2.stop == "reached_end"
+    assert bool(b1.result == RESULTS.reached_end) and bool(b2.result == RESULTS.reached_end)
     # on the contact branch the response is linear: first harmonic 0.03 / (1 - w^2 + 0.1 i w)
     w = b1.omega[-1]
     X1 = b1.y[-1].reshape(2 * K + 1, 1)[1:3, 0] * float(problem.x_scale[0])
@@ -94,7 +95,7 @@ def test_python_driver_matches_and_compiles_once(branch):
 def test_stops_with_reason_and_keeps_points(branch):
     settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02)
     b = C.continue_branch(branch["param"], branch["y0"], 0.5, 1.5, settings, max_points=5)
-    assert b.stop == "max_points" and len(b.lam) == 5 and np.all(np.isfinite(b.y))
+    assert bool(b.result == RESULTS.max_points) and len(b.lam) == 5 and np.all(np.isfinite(b.y))
 
 
 class _Circle(C.AbstractParameter):
@@ -120,7 +121,7 @@ def test_closed_loop_stops_after_one_turn():
     settings = C.Settings(step=0.05, max_step=0.05, max_dlambda=0.05, fold_step=0.05)
     br = C.continue_branch(_Circle(problem=problem), jnp.asarray([0.5]), 1.0, 3.0, settings,
                            max_points=2000)
-    assert br.stop == "closed_loop"
+    assert bool(br.result == RESULTS.closed_loop)
     # one turn of the circle (length pi) in chords of about 0.05, plus the closing stretch
     turn = np.pi / 0.05
     assert turn < len(br.lam) < 1.5 * turn
@@ -130,7 +131,7 @@ def test_closed_loop_stops_after_one_turn():
 def test_branch_through_folds_is_not_a_loop(branch):
     """The oscillator's branch turns back twice, close to itself: not a closed loop."""
     br = C.continue_branch(branch["param"], branch["y0"], 0.5, 1.5, branch["settings"], 400)
-    assert br.stop == "reached_end"
+    assert bool(br.result == RESULTS.reached_end)
     assert len(C.distinct_folds(br.fold_lam[br.fold])) == 2
 
 

@@ -19,6 +19,7 @@ from gearjax._engine import continuation as C
 from gearjax._studies import harmonics as _harmonics
 from gearjax._engine import hb as _hb
 from gearjax._engine.responses import mesh_responses, static_mesh_forces
+from gearjax._engine.results import RESULTS
 
 
 def oscillator_folds(n_time):
@@ -33,14 +34,14 @@ def oscillator_folds(n_time):
     ys, lams, folds, fold_lams, n, code = jax.jit(
         lambda y: C.continue_compiled(param, y, 0.5, 1.5, settings, 400))(y0)
     n = int(n)
-    assert C.STOP_REASONS[int(code)] == "reached_end"
+    assert bool(code == RESULTS.reached_end)
     f = C.distinct_folds(np.asarray(fold_lams[:n])[np.asarray(folds[:n])])
     # the upper (impacting) branch follows the last fold: re-solve at exactly 0.75 from
     # its first point past 0.75
     last_fold = int(np.flatnonzero(np.asarray(folds[:n]))[-1])
     i = last_fold + int(np.argmax(np.asarray(lams[last_fold:n]) > 0.75))
     sol = gj.solve_hb(problem, 0.75, ys[i])
-    assert int(sol.result) == _hb.CONVERGED
+    assert bool(sol.converged)
     rms = float(mesh_responses(problem, sol.X, 0.75, static_mesh_forces(system)).rms_force[0])
     return problem.n_time, np.sort(f), rms
 
@@ -60,7 +61,7 @@ def rms_at(system, f_hz, K, n_time=None):
     problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=K, n_time=n_time))
     omega = 2 * math.pi * f_hz / 7
     sol = jax.jit(gj.solve_hb)(problem, omega)
-    assert int(sol.result) == _hb.CONVERGED
+    assert bool(sol.converged)
     resp = mesh_responses(problem, sol.X, omega, static_mesh_forces(system))
     return problem.n_time, np.asarray(resp.rms_force), np.asarray(resp.separation)
 

@@ -99,7 +99,7 @@ def test_mathieu_tongue_floquet_hill_and_solve_ivp(omega, unstable):
     eps, c = 0.4, 0.05
     problem = _hb.hb_problem(oscillator(c=c, eps=eps, mean=0.0, amp=0.01), SETTINGS)
     sol = solve(problem, omega)
-    assert int(sol.result) == _hb.CONVERGED
+    assert bool(sol.converged)
     ref = mathieu_monodromy(eps, c, omega)
     np.testing.assert_allclose(monodromy(problem, sol.X, omega), ref, atol=1e-9)
     st = stability(problem, sol.X, omega)
@@ -150,7 +150,7 @@ def impacting_solution(system, omega=0.75):
     y0 = jnp.zeros(problem.size).at[0].set(1.1 / problem.x_scale[0]).at[1].set(
         -1.0 / problem.x_scale[0])  # a large-amplitude start: the resonant, impacting branch
     sol = solve(problem, omega, y0)
-    assert int(sol.result) == _hb.CONVERGED
+    assert bool(sol.converged)
     x = _aft.synthesis(sol.X, 512)[:, 0]
     assert float(x.min()) < 0.9 < 1.1 < float(x.max())  # it separates once per period
     return problem, sol
@@ -315,7 +315,7 @@ def test_paper_gear_at_3khz(paper_system):
     problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=32))
     omega = 2 * np.pi * 3000 / 7
     sol = jax.jit(gj.solve_hb)(problem, omega)
-    assert int(sol.result) == _hb.CONVERGED
+    assert bool(sol.converged)
     st = jax.block_until_ready(stability(problem, sol.X, omega))  # compile
     times = []
     for _ in range(3):
@@ -355,7 +355,7 @@ def test_attractor_past_the_fold_is_stable_whatever_its_rigid_pair(paper_system)
     problem = _hb.hb_problem(paper_system, _hb.HarmonicBalance(n_harmonics=32))
     omega = 2 * np.pi * 3306.43 / 7
     sol = _sweep.settled_start(problem, omega)
-    assert int(sol.result) == _hb.CONVERGED
+    assert bool(sol.converged)
     st = stability(problem, sol.X, omega)
     mu, excluded = np.abs(np.asarray(st.multipliers)), np.asarray(st.excluded)
     assert excluded.sum() == 2 and np.all(mu[excluded] > 1)

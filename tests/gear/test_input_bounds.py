@@ -28,21 +28,11 @@ from gearjax._errors import RangeWarning, TrainWarning
 from gearjax._gear.toml_io import load_train
 from gearjax._gear.validate import BOUNDS, MAX_HARMONICS, check_ranges
 
-SOURCE = "bad.toml"
-MESSAGE = re.compile(r"^bad\.toml: (?P<field>.+?) = (?P<value>.+?): (?P<rule>.+)$")
+import train_refusals
+from train_refusals import SOURCE, mutate
+
 REPO = Path(__file__).resolve().parents[2]
 SHARED = REPO.parent / "shared" / "examples" / "al_shyyab_2009.toml"
-
-
-@pytest.fixture(scope="module")
-def text() -> str:
-    return gearjax.bundled_example_path().read_text()
-
-
-def mutate(text: str, change) -> str:
-    raw = tomllib.loads(text)
-    change(raw)
-    return tomli_w.dumps(raw)
 
 
 def load(text: str, source: str = SOURCE):
@@ -55,17 +45,7 @@ def load(text: str, source: str = SOURCE):
 
 def refuse(text: str, field: str, value: str, *words: str) -> str:
     """Expect a TrainError with a one-line ``bad.toml: FIELD = VALUE: RULE`` message."""
-    with pytest.raises(TrainError) as info:
-        load(text)
-    msg = str(info.value)
-    assert "\n" not in msg, msg
-    m = MESSAGE.match(msg)
-    assert m is not None, msg
-    assert field in m["field"], msg
-    assert f"{field} = {value}" in msg or value in m["value"], msg
-    for w in words:
-        assert w in m["rule"], msg
-    return msg
+    return train_refusals.refuse(load, text, field, value, *words, value_at_field=True)
 
 
 def warned(text: str, field: str, *words: str) -> str:
@@ -83,35 +63,35 @@ def warned(text: str, field: str, *words: str) -> str:
 # ------------------------------------------------------------------ 1. brake and couplings
 
 
-def test_braked_zero_refused(text):
-    msg = refuse(mutate(text, lambda r: r["housing"].update(braked=0.0)),
+def test_braked_zero_refused(paper_text):
+    msg = refuse(mutate(paper_text, lambda r: r["housing"].update(braked=0.0)),
                  "housing.braked", "0.0", "> 0", "cannot hold")
     assert "undetermined" in msg
 
 
-def test_coupling_zero_refused(text):
-    msg = refuse(mutate(text, lambda r: r["couplings"][0].update(stiffness=0)),
+def test_coupling_zero_refused(paper_text):
+    msg = refuse(mutate(paper_text, lambda r: r["couplings"][0].update(stiffness=0)),
                  "couplings[0].stiffness", "0", "> 0", "transmits no torque")
     assert "1.carrier" in msg and "2.ring" in msg  # the members it joins
     assert "remove the coupling" in msg and "gears = [...]" in msg
 
 
-def test_soft_brake_warned(text):
+def test_soft_brake_warned(paper_text):
     # Carrier 1 (braked in reverse): N (k_s r_s^2 + k_r r_r^2) = 5.67e6 N m/rad, so a brake
     # of 1e6 N m/rad is below 10 x that.
-    note = warned(mutate(text, lambda r: r["housing"].update(braked=1.0e6)),
+    note = warned(mutate(paper_text, lambda r: r["housing"].update(braked=1.0e6)),
                   "housing.braked", "1000000.0", "10 x", "5.67e+06", "1.carrier", "reverse")
     assert "5.67e+07" in note
 
 
-def test_stiff_free_housing_warned(text):
+def test_stiff_free_housing_warned(paper_text):
     # Sun 1 has the smallest mesh torsional stiffness, N k_s r_s^2 = 7.91e5 N m/rad.
-    warned(mutate(text, lambda r: r["housing"].update(free=1.0e5)),
+    warned(mutate(paper_text, lambda r: r["housing"].update(free=1.0e5)),
            "housing.free", "0.01 x", "7.91e+05", "1.sun")
 
 
-def test_bundled_and_shared_examples_give_no_range_warning(text):
-    _, notes = load(text)
+def test_bundled_and_shared_examples_give_no_range_warning(paper_text):
+    _, notes = load(paper_text)
     assert notes == []
     if SHARED.exists():
         with warnings.catch_warnings(record=True) as record:
@@ -161,8 +141,8 @@ def _sub(i, key, member, value):
          "1e+300", "<= 1e+10 N m"),
     ],
 )
-def test_out_of_range_refused(text, change, field, value, rule):
-    refuse(mutate(text, change), field, value, rule)
+def test_out_of_range_refused(paper_text, change, field, value, rule):
+    refuse(mutate(paper_text, change), field, value, rule)
 
 
 @pytest.mark.parametrize(
@@ -188,13 +168,13 @@ def test_out_of_range_refused(text, change, field, value, rule):
          ("500000000.0", "above the usual 1e+08 N m")),
     ],
 )
-def test_unusual_value_warned(text, change, field, words):
-    note = warned(mutate(text, change), field, *words)
+def test_unusual_value_warned(paper_text, change, field, words):
+    note = warned(mutate(paper_text, change), field, *words)
     assert "data kept as given" in note
 
 
-def test_validate_train_returns_range_warnings(text):
-    bad = mutate(text, lambda r: r["stages"][1].update(mesh_damping_ratio=0.3))
+def test_validate_train_returns_range_warnings(paper_text):
+    bad = mutate(paper_text, lambda r: r["stages"][1].update(mesh_damping_ratio=0.3))
     train = gearjax.loads_train(bad, source=SOURCE, validate=False)
     with warnings.catch_warnings(record=True) as record:
         warnings.simplefilter("always")
@@ -209,10 +189,10 @@ def test_validate_train_returns_range_warnings(text):
             assert gearjax.validate_train(train) == messages
 
 
-def test_code_built_train_checked_too(text):
+def test_code_built_train_checked_too(paper_text):
     import dataclasses
 
-    train = gearjax.loads_train(text, source=SOURCE, validate=False)
+    train = gearjax.loads_train(paper_text, source=SOURCE, validate=False)
     bad = dataclasses.replace(train, housing=dataclasses.replace(train.housing, braked=0.0))
     with pytest.raises(TrainError, match=r"housing\.braked = 0\.0: must be > 0"):
         gearjax.validate_train(bad, emit_warnings=False)
@@ -234,44 +214,44 @@ def test_bounds_listed_in_docs():
 # ------------------------------------------------------------------ 3. sizes, orders
 
 
-def test_stiffness_harmonics_bounded(text):
-    refuse(mutate(text, lambda r: r.update(stiffness_harmonics=1000)),
+def test_stiffness_harmonics_bounded(paper_text):
+    refuse(mutate(paper_text, lambda r: r.update(stiffness_harmonics=1000)),
            "stiffness_harmonics", "1000", f"<= {MAX_HARMONICS}", "H x max(mu)", "square")
 
 
-def test_transmission_error_pairs_bounded(text):
+def test_transmission_error_pairs_bounded(paper_text):
     rows = [[1e-7, 0.0]] * (MAX_HARMONICS + 1)
-    refuse(mutate(text, _stage(0, "transmission_error", {"sun": rows})),
+    refuse(mutate(paper_text, _stage(0, "transmission_error", {"sun": rows})),
            "1.transmission_error.sun", "[[1e-07, 0.0]", f"at most {MAX_HARMONICS} pairs",
            f"got {MAX_HARMONICS + 1}", "square")
 
 
-def test_ripple_rows_bounded(text):
+def test_ripple_rows_bounded(paper_text):
     rows = [[1.0, 0.0, 2.0]] * (MAX_HARMONICS + 1)
-    refuse(mutate(text, lambda r: r["gears"]["first"].update(input_torque_ripple=rows)),
+    refuse(mutate(paper_text, lambda r: r["gears"]["first"].update(input_torque_ripple=rows)),
            "gears.first.input_torque_ripple", "[[1.0, 0.0]", f"at most {MAX_HARMONICS} rows")
 
 
 @pytest.mark.parametrize("order, rule", [(2000.0, "<= 1000"), (1e-3, ">= 0.01"), (0.0, "> 0")])
-def test_ripple_order_bounded(text, order, rule):
-    refuse(mutate(text, lambda r: r["gears"]["first"].update(
+def test_ripple_order_bounded(paper_text, order, rule):
+    refuse(mutate(paper_text, lambda r: r["gears"]["first"].update(
         input_torque_ripple=[[1.0, 0.0, 2.0], [1.0, 0.0, order]])),
         "gears.first.input_torque_ripple", "", rule)
 
 
 @pytest.mark.parametrize("bad", ["nan", "inf", "-inf", "+nan"])
-def test_nan_and_inf_refused(text, bad):
-    t = text.replace("mesh_stiffness = { sun = 4.1e8", f"mesh_stiffness = {{ sun = {bad}")
-    assert t != text
+def test_nan_and_inf_refused(paper_text, bad):
+    t = paper_text.replace("mesh_stiffness = { sun = 4.1e8", f"mesh_stiffness = {{ sun = {bad}")
+    assert t != paper_text
     refuse(t, "2.mesh_stiffness.sun", bad.lstrip("+"), "finite number")
 
 
 # ------------------------------------------------------------------ 4. integers and types
 
 
-def test_teeth_integer_overflow(text):
-    t = text.replace("teeth = { sun = 30,", "teeth = { sun = 99999999999999999999,")
-    assert t != text
+def test_teeth_integer_overflow(paper_text):
+    t = paper_text.replace("teeth = { sun = 30,", "teeth = { sun = 99999999999999999999,")
+    assert t != paper_text
     refuse(t, "1.teeth.sun", "99999999999999999999", "<= 10000")
 
 
@@ -280,13 +260,13 @@ def test_teeth_integer_overflow(text):
     [(30.0, "30.0", "no decimal point"), (True, "True", "integer"), ("30", "'30'", "integer"),
      ([30], "[30]", "integer"), ({"n": 30}, "{'n': 30}", "integer"), (1e300, "1e+300", "integer")],
 )
-def test_integer_key_wrong_type(text, value, shown, rule):
-    refuse(mutate(text, _sub(0, "teeth", "ring", value)), "1.teeth.ring", shown, rule)
+def test_integer_key_wrong_type(paper_text, value, shown, rule):
+    refuse(mutate(paper_text, _sub(0, "teeth", "ring", value)), "1.teeth.ring", shown, rule)
 
 
-def test_float_key_integer_too_large(text):
-    t = text.replace("planet_mass = 0.300", "planet_mass = 1" + "0" * 400)
-    assert t != text
+def test_float_key_integer_too_large(paper_text):
+    t = paper_text.replace("planet_mass = 0.300", "planet_mass = 1" + "0" * 400)
+    assert t != paper_text
     refuse(t, "1.planet_mass", "1000", "finite number")
 
 
@@ -313,9 +293,9 @@ def test_binary_file_refused(tmp_path):
 
 
 @pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le"])
-def test_utf16_file_refused(tmp_path, text, encoding):
+def test_utf16_file_refused(tmp_path, paper_text, encoding):
     p = tmp_path / "utf16.toml"
-    p.write_bytes(text.encode(encoding))
+    p.write_bytes(paper_text.encode(encoding))
     file_refused(p, "UTF-16" if encoding == "utf-16" else "NUL bytes", "UTF-8")
 
 
@@ -332,14 +312,14 @@ def test_directory_missing_and_unreadable_refused(tmp_path, monkeypatch):
     file_refused(p, "cannot be read", "Permission denied")
 
 
-def test_utf8_byte_order_mark_accepted(tmp_path, text):
+def test_utf8_byte_order_mark_accepted(tmp_path, paper_text):
     p = tmp_path / "windows.toml"
-    p.write_bytes(b"\xef\xbb\xbf" + text.replace("\n", "\r\n").encode())
+    p.write_bytes(b"\xef\xbb\xbf" + paper_text.replace("\n", "\r\n").encode())
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", GeometryWarning)
         train = load_train(p)
         assert train.stage_ids == ("1", "2")
-        assert gearjax.loads_train("\ufeff" + text).stage_ids == ("1", "2")
+        assert gearjax.loads_train("\ufeff" + paper_text).stage_ids == ("1", "2")
 
 
 @pytest.mark.parametrize(
@@ -356,8 +336,8 @@ def test_malformed_toml_one_line(bad, words):
         assert w in msg, msg
 
 
-def test_message_stays_one_line_with_odd_names(text):
-    raw = tomllib.loads(text)
+def test_message_stays_one_line_with_odd_names(paper_text):
+    raw = tomllib.loads(paper_text)
     raw["gears"]["bad\ngear"] = raw["gears"].pop("second")
     raw["gears"]["bad\ngear"]["input_torque"] = float("nan")
     with pytest.raises(TrainError) as info:
@@ -437,10 +417,10 @@ def corpus(text: str):
     yield "utf-16-be", text.encode("utf-16-be"), False
 
 
-def test_corpus_every_break_refused_on_one_line(tmp_path, text):
+def test_corpus_every_break_refused_on_one_line(tmp_path, paper_text):
     p = tmp_path / "broken.toml"
     problems, n = [], 0
-    for name, data, allowed in corpus(text):
+    for name, data, allowed in corpus(paper_text):
         n += 1
         p.write_bytes(data)
         try:
@@ -465,15 +445,15 @@ def test_corpus_every_break_refused_on_one_line(tmp_path, text):
 # ------------------------------------------------------------------ CLI
 
 
-def test_cli_refuses_broken_files_on_one_line(tmp_path, text):
+def test_cli_refuses_broken_files_on_one_line(tmp_path, paper_text):
     cases = {
-        "braked0.toml": mutate(text, lambda r: r["housing"].update(braked=0.0)).encode(),
-        "nan.toml": text.replace("mesh_stiffness = { sun = 4.1e8",
-                                 "mesh_stiffness = { sun = nan").encode(),
-        "teeth.toml": text.replace("teeth = { sun = 30,",
-                                   "teeth = { sun = 99999999999999999999,").encode(),
+        "braked0.toml": mutate(paper_text, lambda r: r["housing"].update(braked=0.0)).encode(),
+        "nan.toml": paper_text.replace("mesh_stiffness = { sun = 4.1e8",
+                                       "mesh_stiffness = { sun = nan").encode(),
+        "teeth.toml": paper_text.replace("teeth = { sun = 30,",
+                                         "teeth = { sun = 99999999999999999999,").encode(),
         "binary.toml": bytes(range(256)) * 4,
-        "utf16.toml": text.encode("utf-16"),
+        "utf16.toml": paper_text.encode("utf-16"),
     }
     exe = Path(sys.executable).with_name("gearjax")
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "gearjax._cli"]
@@ -492,6 +472,6 @@ def test_cli_refuses_broken_files_on_one_line(tmp_path, text):
         assert str(tmp_path / name) in lines[0], (name, err)
 
 
-def test_check_ranges_passes_bundled(text):
-    train = gearjax.loads_train(text, source=SOURCE, validate=False)
+def test_check_ranges_passes_bundled(paper_text):
+    train = gearjax.loads_train(paper_text, source=SOURCE, validate=False)
     assert check_ranges(train) == []

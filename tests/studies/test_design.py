@@ -316,6 +316,7 @@ def test_nonlinear_tier_never_makes_the_peak_with_backlash_worse(small):
     assert ds.attrs["baseline_peak_nonlinear"] == pytest.approx(b.peak)
 
 
+@pytest.mark.slow
 def test_recheck_sweeps_and_integrates_baseline_and_optimum(small):
     train = gj.load_train(small)
     result = O.optimize(train, "low", (2000.0, 9000.0), settings=TINY_SETTINGS)

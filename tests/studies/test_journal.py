@@ -354,3 +354,19 @@ def test_journal_lock_is_reentrant_and_held_by_the_writer(tmp_path):
     with _journal.lock(path):
         assert _journal.holder(path) is None
     assert not lock_file.exists() and len(_journal.read(path)[1]) == 2
+
+
+def test_a_journal_with_integer_result_codes_resumes(train, tmp_path):
+    """Journals written before the one ``RESULTS`` enumeration stored a linear batch's
+    results as integer codes (0 converged, 1 max_steps, 2 nonfinite): they still resume,
+    to the same words."""
+    kw = dict(from_hz=2400.0, to_hz=2450.0, linear=True, harmonics=8, points=3)
+    path = tmp_path / "lin.nc.journal"
+    result = _sweep.sweep(train, "first", journal=path, **kw)
+    head, batch = records(path.read_bytes())
+    rec = _journal.decode(batch.rstrip(b"\n"))
+    assert list(rec["result"]) == ["converged"] * 3
+    rec["result"] = np.zeros(3, np.int64)
+    path.write_bytes(head + _journal.encode(rec))
+    same_results(_sweep.sweep(train, "first", journal=path, resume=True, **kw).dataset,
+                 result.dataset)

@@ -16,6 +16,7 @@ import gearjax as gj
 from gearjax._engine import hb as _hb
 from gearjax import _cli
 from gearjax._studies import sensitivity as S
+from gearjax._engine.results import RESULTS
 
 K = 8
 AT = 3000.0  # Hz: contact is kept on every mesh at this K, with backlash too
@@ -44,7 +45,7 @@ def finite_differences(train, result, linear):
         e = jnp.zeros(theta.shape).at[k].set(h)
         r_plus, c_plus = S.response_at(family, theta + e, settings, omega, resp, X0)
         r_minus, c_minus = S.response_at(family, theta - e, settings, omega, resp, X0)
-        assert c_plus == c_minus == _hb.CONVERGED
+        assert bool(c_plus == RESULTS.successful) and bool(c_minus == RESULTS.successful)
         fd.append((r_plus - r_minus) / (2 * h))
         noise.append(1e-10 * abs(result.value) / h)  # Newton's converged noise over h
     return np.asarray(fd), np.asarray(noise)
@@ -60,7 +61,8 @@ def linear(train):
     return S.sensitivity(train, at_hz=AT, paths=PATHS, harmonics=K, linear=True)
 
 
-@pytest.mark.parametrize("case", ["backlash", "linear"])
+@pytest.mark.parametrize("case", [pytest.param("backlash", marks=pytest.mark.slow),
+                                  "linear"])
 def test_implicit_gradient_matches_finite_differences(train, case, request):
     result = request.getfixturevalue(case)
     assert result.ok, result.message
@@ -110,7 +112,7 @@ def oscillator_point(omega):
     family = Oscillator()
     problem = _hb.hb_problem(family(OSC_THETA), OSC_SETTINGS)
     sol = S.solve_at(family, OSC_THETA, OSC_SETTINGS, jnp.asarray(omega))
-    assert int(sol.result) == _hb.CONVERGED
+    assert bool(sol.converged)
     grad = S.implicit_gradient(family, OSC_THETA, OSC_SETTINGS, sol.y, jnp.asarray(omega),
                                S.MeshResponse(field="rms_force", mesh=0))
     return problem, sol, grad
@@ -186,13 +188,13 @@ def test_cli_bad_input(capsys, argv, field):
 
 
 def test_cli_not_converged(capsys, monkeypatch, paper_toml_h1):
-    solve = S._GearPoint.solve
+    solve = S.GearPoint.solve
 
     def failing(self, f_hz, X0=None):
         sol = solve(self, f_hz, X0)
-        return eqx.tree_at(lambda s: s.result, sol, jnp.asarray(_hb.MAX_STEPS))
+        return eqx.tree_at(lambda s: s.result, sol, RESULTS.nonlinear_max_steps_reached)
 
-    monkeypatch.setattr(S._GearPoint, "solve", failing)
+    monkeypatch.setattr(S.GearPoint, "solve", failing)
     code, out, err = run(capsys, "sensitivity", str(paper_toml_h1), "--at", str(AT),
                          "--harmonics", str(K), "--vary", *PATHS, "--json")
     assert code == 3
@@ -205,6 +207,7 @@ def test_cli_not_converged(capsys, monkeypatch, paper_toml_h1):
 # ------------------------------------------------------------------- stage phase
 
 
+@pytest.mark.slow
 def test_stage_phase_derivative_resolved_and_a_time_shift():
     # A stage phase shifts one stage's excitation in time. The stage-1 meshes vary at
     # 7 h and the stage-2 meshes at 8 h times the base frequency, so the two stages'
@@ -225,6 +228,7 @@ def test_stage_phase_derivative_resolved_and_a_time_shift():
     assert mu[0] * d1 + mu[1] * d2 == pytest.approx(0.0, abs=1e-8 * abs(mu[1] * d2))
 
 
+@pytest.mark.slow
 def test_default_paths_are_those_of_the_gear(train):
     every = gj.continuous_paths(train)
     first = gj.continuous_paths(train, "first")

@@ -22,6 +22,7 @@ from gearjax._studies import harmonics as _harmonics
 from gearjax._studies import sweep as _sweep
 from gearjax._studies.sweep import segments, speculation, starts, walk
 from gearjax._cli import main
+from gearjax._engine.results import RESULTS
 
 
 @pytest.fixture(scope="module")
@@ -217,6 +218,7 @@ def _wait_for_post_threads(timeout=10.0):
     return threading.enumerate()
 
 
+@pytest.mark.slow
 def test_start_past_the_fold_by_time_integration(train):
     """Just past the 3.27 kHz fold (paper, 0.05 mm backlash, K = 32) Newton from the linear,
     in-contact guess fails: the stage-2 sun meshes separate 36% of the period. The start
@@ -229,18 +231,19 @@ def test_start_past_the_fold_by_time_integration(train):
     problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=32))
     omega = 2 * math.pi * 3306.43 / 7
     guess = _hb.linear_guess(problem, omega)
-    assert int(starts.newton(problem, jnp.asarray(omega), guess).result) != _hb.CONVERGED
+    assert not bool(starts.newton(problem, jnp.asarray(omega), guess).converged)
     sol = starts.settled_start(problem, omega)
-    assert int(sol.result) == _hb.CONVERGED and int(sol.steps) <= 6
+    assert bool(sol.converged) and int(sol.stats["num_steps"]) <= 6
     assert bool(gj.stability(problem, sol.X, omega).stable)
     p = np.asarray(_aft.synthesis(sol.X @ system.W.T, 512))
     separated = np.mean(np.abs(p) <= np.asarray(system.backlash), axis=0)
     np.testing.assert_allclose(separated[4:8], 0.365, atol=0.01)
     assert np.all(np.delete(separated, np.s_[4:8]) == 0)
     y, code = starts.start_point(problem, omega)  # the sweep's start goes the same way
-    assert code == _hb.CONVERGED and np.allclose(y, sol.y, rtol=0, atol=1e-9)
+    assert bool(code == RESULTS.successful) and np.allclose(y, sol.y, rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_branch_past_a_fold_restarts_beyond_it_with_doubling_gaps(train, monkeypatch):
     """Up through the fold at 3271.1 Hz (K = 32) the branch turns back; after ``max_detour`` points
     without passing the furthest frequency the sweep keeps them and restarts a fresh branch
@@ -252,7 +255,9 @@ def test_branch_past_a_fold_restarts_beyond_it_with_doubling_gaps(train, monkeyp
 
     def no_start(problem, omega, state=None):
         tried.append(float(omega))
-        return real_start(problem, omega, state) if len(tried) == 1 else (None, _hb.MAX_STEPS)
+        if len(tried) == 1:
+            return real_start(problem, omega, state)
+        return None, RESULTS.nonlinear_max_steps_reached
 
     monkeypatch.setattr(starts, "start_point", no_start)
     r = _sweep.sweep(train, "first", 3240, 3300, harmonics=32, max_step_hz=10, max_detour=10)

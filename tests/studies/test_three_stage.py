@@ -44,7 +44,7 @@ def reference_rms(system, f_hz, K):
     problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=K))
     omega = 2 * math.pi * f_hz / MU_REF
     sol = newton_jit(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
-    assert int(sol.result) == _hb.CONVERGED
+    assert bool(sol.converged)
     return np.asarray(mesh_responses(problem, sol.X, omega, static_mesh_forces(system)).rms_force)
 
 
@@ -74,6 +74,7 @@ def test_three_stage_mesh_modes_reach_10_khz(capsys):
     assert max(mesh) == pytest.approx(10.06e3, rel=0.01)
 
 
+@pytest.mark.slow
 def test_sweep_raises_k_until_truncation_meets_target():
     train = gj.load_train(TRAIN)
     system = linear_system(train)

@@ -102,6 +102,7 @@ def test_memory_rule_refuses_with_mu_harmonics_and_memory(train, capsys, monkeyp
         verify_gear(train, "first", [4000.0], linear=True)
 
 
+@pytest.mark.slow
 def test_incommensurate_train_is_solved_right_or_refused(incommensurate, capsys):
     """43/19/81: mu = (70, 81), the excitation reaches harmonic 324. Never the flat,
     wrong curve of a K = 64 balance: too few harmonics are refused, and the default is
@@ -122,6 +123,7 @@ def test_incommensurate_train_is_solved_right_or_refused(incommensurate, capsys)
     assert max(m["rel_diff"] for m in point["meshes"]) < 0.01
 
 
+@pytest.mark.slow
 def test_truncation_check_raises_K_where_the_first_choice_is_short(train, monkeypatch):
     """0.05 mm backlash at 4 kHz, the stage-1 ring meshes separating: K = 32 is off by
     about 3% (tests/test_hb_rules.py), K = 64 is within the target. With a first choice

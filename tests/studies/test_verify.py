@@ -56,6 +56,7 @@ def test_bad_input_exits_2_with_one_line(capsys, argv, message):
     assert "Traceback" not in "\n".join(err)
 
 
+@pytest.mark.slow
 def test_verify_linear_paper_first_gear_within_1_percent(capsys, tmp_path):
     fig, nc = tmp_path / "verify.png", tmp_path / "verify.nc"
     code = main(["verify", "--linear", "--at", "3000", "3300", "--json", "--plot", str(fig),
@@ -91,6 +92,7 @@ def test_verify_with_backlash_off_the_jumps_within_2_percent(verified):
         assert ds["separation"].values[0].max() > 0.05
 
 
+@pytest.mark.slow
 def test_simulate_from_static_lands_on_the_verified_orbit(simulated, verified):
     """Off the jumps the orbit is unique: the static start settles on the HB orbit."""
     ds = simulated
@@ -101,6 +103,7 @@ def test_simulate_from_static_lands_on_the_verified_orbit(simulated, verified):
     assert np.all(ds["periods"].values > verified.ni["periods"].values)  # HB start: faster
 
 
+@pytest.mark.slow
 def test_simulate_cli_json_and_csv(capsys, tmp_path, simulated):
     csv = tmp_path / "sim.csv"
     code = main(["simulate", "--at", "4000", "4300", "--json", "--out", str(csv)])
@@ -118,6 +121,7 @@ def test_simulate_cli_json_and_csv(capsys, tmp_path, simulated):
     assert csv.read_text().count("\n") == 1 + 2 * 16
 
 
+@pytest.mark.slow
 def test_simulate_sweep_continues_in_order(train, simulated):
     """A run-down 4.3 -> 4 kHz: points in sweep order, each started from the previous end."""
     ds = gj.simulate_gear(train, "first", from_hz=4300.0, to_hz=4000.0, points=2)

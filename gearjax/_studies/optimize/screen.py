@@ -16,6 +16,7 @@ import numpy as np
 
 from ..._engine import hb as _hb
 from ..._engine.modal import modes
+from ..._engine.results import RESULTS
 from ..._gear.train import Train
 from ..design import batched_rms
 from ..sensitivity import GearFamily
@@ -77,8 +78,8 @@ class Screen:
                 w = np.concatenate([w, np.repeat(w[-1:], size - n, axis=0)])
             rms, code = batched_rms(self.family, part, w, self.hb_settings, solver="linear",
                                     devices=self.devices)
-            rms, code = np.asarray(rms)[:n], np.asarray(code)[:n]
-            out.append(np.where((code == _hb.CONVERGED)[..., None], rms, np.nan))
+            ok = np.asarray(code == RESULTS.successful)[:n]
+            out.append(np.where(ok[..., None], np.asarray(rms)[:n], np.nan))
         return np.concatenate(out)
 
 

@@ -26,7 +26,6 @@ ahead of time), :mod:`.post` (responses, stability, bifurcations), :mod:`.record
 """
 
 from ..._engine.responses import static_mesh_forces as static_mesh_forces
-from .. import concurrency
 from .api import sweep as sweep
 from .post import POST_CHUNK as POST_CHUNK
 from .post import SWEEP_FLOQUET_STEPS as SWEEP_FLOQUET_STEPS
@@ -35,6 +34,7 @@ from .post import batch_monodromy as batch_monodromy
 from .post import batch_verdict as batch_verdict
 from .post import bifurcations as bifurcations
 from .post import point_rows as point_rows
+from .post import point_rows as responses_and_stability
 from .progress import progress_printer as progress_printer
 from .record import SweepLog as SweepLog
 from .starts import backlash_start as backlash_start
@@ -42,6 +42,7 @@ from .starts import newton as newton
 from .starts import resize_harmonics as resize_harmonics
 from .starts import settled_start as settled_start
 from .starts import solve_points as solve_points
+from .starts import solve_points as solve_hb_points
 from .starts import start_point as start_point
 from .summary import SweepResult as SweepResult
 from .summary import summary_json as summary_json

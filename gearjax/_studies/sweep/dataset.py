@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._engine import hb as _hb
+from ..._engine.results import legacy_words
 from ..._io.results import add_displacement_harmonics, mesh_coordinates, sweep_dataset
 from .post import bifurcations, point_rows
 
@@ -29,7 +29,8 @@ def point_data(walk, log, post, ctx, F_static, *, linear: bool) -> dict:
         if linear:
             batch = log.batch(j)
             rows.append(point_rows(problem, jnp.asarray(batch["X"]),
-                                   jnp.asarray(batch["omega"]), batch["result"], F_static))
+                                   jnp.asarray(batch["omega"]),
+                                   legacy_words(batch["result"], "hb"), F_static))
             rows[-1]["branch"] = np.zeros(len(batch["omega"]), int)
             continue
         pts = log.points(j)
@@ -71,7 +72,7 @@ def sweep_result_dataset(data: dict, case, *, F_static, train_toml: str, solver:
         stage_mesh_frequency_hz=stage_hz,
         input_rpm=np.array([case.kin.input_rpm(case.stage, f) for f in f_ref]),
         omega=omegas,
-        result=[_hb.RESULTS[c] for c in data["result"]],
+        result=list(data["result"]),
         stable=data["stable"],
         static_force=np.asarray(F_static),
         train_toml=train_toml,

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._engine.responses import mesh_responses
+from ..._engine.results import RESULTS, result_word
 from ..._engine.verdict import (
     bifurcation_kind,
     floquet_steps,
@@ -39,7 +40,8 @@ POST_THREAD = "gearjax-post"
 
 def point_rows(problem, Xs, omegas, results, F_static, done=()):
     """Responses and stability of a batch of solutions ``Xs`` ``(P, C, n)`` at base
-    frequencies ``omegas`` ``(P,)`` (rad/s), in chunks of :data:`POST_CHUNK` points (the
+    frequencies ``omegas`` ``(P,)`` (rad/s) with results ``results`` ``(P,)`` (words,
+    :func:`~gearjax._engine.results.result_word`), in chunks of :data:`POST_CHUNK` points (the
     last padded by repeating its final point), several chunks at a time
     (:func:`gearjax._studies.concurrency.map_in_threads`). ``done``: the outputs of
     :func:`post_chunk` for the leading chunks, computed before (:class:`PostStream`).
@@ -115,7 +117,8 @@ class PostStream:
         """:func:`point_rows` of segment ``j``'s points ``pts``."""
         done = [f.result() for f in self._chunks.pop(j, [])]
         Xs, omegas = point_arrays(problem, omega_ref, pts)
-        return point_rows(problem, Xs, omegas, np.zeros(len(pts), int), self._F, done)
+        return point_rows(problem, Xs, omegas, np.full(len(pts), result_word(RESULTS.successful)),
+                          self._F, done)
 
     def rename(self, old, new) -> None:
         """Segment ``old``'s chunks are segment ``new``'s (an adopted speculation)."""

@@ -97,12 +97,12 @@ def truncation_at(ctx, K: int, f_hz, F_static) -> tuple[float, bool]:
     omega = ctx.omega(f_hz)
     problem, wide = ctx.problem(K), ctx.problem(2 * K)
     sol = newton(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
-    if int(sol.result) != _hb.CONVERGED and problem.system.has_backlash:
+    if not bool(sol.converged) and problem.system.has_backlash:
         lin = dataclasses.replace(problem.system,
                                   backlash=jnp.zeros_like(problem.system.backlash))
         problem, wide = (_hb.hb_problem(lin, p.settings) for p in (problem, wide))
         sol = newton(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
     backlash = problem.system.has_backlash
-    if int(sol.result) != _hb.CONVERGED:
+    if not bool(sol.converged):
         return math.inf, backlash
     return _harmonics.truncation_change(problem, wide, sol.y, omega, F_static), backlash

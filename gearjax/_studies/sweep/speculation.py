@@ -22,6 +22,7 @@ import threading
 import jax.numpy as jnp
 
 from ..._engine import hb as _hb
+from ..._engine.results import RESULTS
 from .. import concurrency
 from . import starts as _starts
 from . import walk as _walk
@@ -45,7 +46,7 @@ class Speculation:
         self.ctx, self.segment, self.post = ctx, segment, post
         self.walk = _walk.Walk(segments=[segment])
         self.log = SweepLog([])
-        self.entered = None  # (y, result code, lambda) of the fresh start
+        self.entered = None  # (y, result, lambda) of the fresh start
         self.error = None
         self._cancel = threading.Event()
         self._started = threading.Event()
@@ -73,10 +74,10 @@ class Speculation:
         problem = self.ctx.problem(K)
         omega = jnp.asarray(self.ctx.omega(f_a))
         sol = _starts.newton(problem, omega, _hb.linear_guess(problem, omega))
-        self.entered = (sol.y, int(sol.result), self.ctx.lam(f_a))
+        self.entered = (sol.y, sol.result, self.ctx.lam(f_a))
 
     def _continue(self):
-        if self.entered[1] != _hb.CONVERGED:
+        if not bool(self.entered[1] == RESULTS.successful):
             return
         while len(self.walk.problems) < len(self.walk.segments):
             if self._cancel.is_set():
@@ -100,7 +101,7 @@ class Speculation:
             self.post.drop(self.key(j))
 
     def adopt(self, walk, entered, log) -> bool:
-        """Whether the walk's start ``entered`` ``(y, code, lambda)`` of the next segment
+        """Whether the walk's start ``entered`` ``(y, result, lambda)`` of the next segment
         (this one's) is this one's orbit, at its first frequency; if so, once it is
         finished, its records are appended to ``log`` as that segment and those after it
         (the walk then takes them from there) and its post-processing is handed over. A
@@ -114,7 +115,8 @@ class Speculation:
             raise self.error
         y, code, lam = entered
         y_spec, code_spec, lam_spec = self.entered
-        same = code == code_spec == _hb.CONVERGED and lam == lam_spec and float(
+        same = bool((code == RESULTS.successful) & (code_spec == RESULTS.successful)) \
+            and lam == lam_spec and float(
             jnp.max(jnp.abs(y - y_spec))) <= SAME_ORBIT * max(1.0, float(jnp.max(jnp.abs(y))))
         if not same:
             self.cancel()

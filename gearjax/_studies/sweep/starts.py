@@ -13,6 +13,7 @@ from ..._engine import continuation as _continuation
 from ..._engine import hb as _hb
 from ..._engine import time_domain as _time_domain
 from ..._engine.newton import newton_jit, solve_hb, solve_linear
+from ..._engine.results import RESULTS
 
 newton = newton_jit
 """The compiled Newton solve ``newton(problem, omega, y)`` every start uses."""
@@ -28,8 +29,8 @@ guess (the periodicity check is at ``100 SETTLE_RTOL``)."""
 
 
 def enter_segment(problem, previous, lam, omega_ref, guess=None):
-    """``(y, result code, lambda)``: scaled unknowns with this segment's harmonics,
-    converged at ``lambda``, where the segment starts.
+    """``(y, result, lambda)`` (``result`` a ``RESULTS`` item): scaled unknowns with this
+    segment's harmonics, converged at ``lambda``, where the segment starts.
 
     Continuing ``previous`` ``(K, y, lambda, before)`` (the last point of the segment
     before, which lies past ``lam``, the boundary, and the point before it): at ``lam``
@@ -45,8 +46,8 @@ def enter_segment(problem, previous, lam, omega_ref, guess=None):
             K_old, y_old, _ = guess
             y = resize_harmonics(y_old, K_old, problem)
             sol = newton(problem, jnp.asarray(lam * omega_ref), y)
-            if int(sol.result) == _hb.CONVERGED:
-                return sol.y, _hb.CONVERGED, lam
+            if bool(sol.converged):
+                return sol.y, sol.result, lam
             state = _time_domain.hb_initial_state(y.reshape(problem.shape) * problem.x_scale,
                                                   lam * omega_ref, problem.settings.eta)
         return (*start_point(problem, lam * omega_ref, state), lam)
@@ -56,29 +57,29 @@ def enter_segment(problem, previous, lam, omega_ref, guess=None):
         chord = (1 - w) * np.asarray(before[0]) + w * np.asarray(y_old)
         sol = newton(problem, jnp.asarray(lam * omega_ref),
                      resize_harmonics(chord, K_old, problem))
-        if int(sol.result) == _hb.CONVERGED:
-            return sol.y, _hb.CONVERGED, lam
+        if bool(sol.converged):
+            return sol.y, sol.result, lam
     sol = newton(problem, jnp.asarray(lam_old * omega_ref),
                  resize_harmonics(y_old, K_old, problem))
-    return sol.y, int(sol.result), lam_old
+    return sol.y, sol.result, lam_old
 
 
 def start_point(problem, omega, state=None):
-    """``(y, result code)`` at ``omega`` (rad/s): Newton from the linear, in-contact
+    """``(y, result)`` at ``omega`` (rad/s): Newton from the linear, in-contact
     guess; with backlash, when that fails, :func:`backlash_start`. With a ``state``
     ``(x0, v0)`` (where a branch left off) the time integration starts from it, and
     before Newton."""
     backlash = problem.system.has_backlash
     if state is not None and backlash:
         sol = settled_start(problem, omega, state)
-        if int(sol.result) == _hb.CONVERGED:
-            return sol.y, _hb.CONVERGED
+        if bool(sol.converged):
+            return sol.y, sol.result
     sol = newton(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
-    if int(sol.result) != _hb.CONVERGED and backlash:
+    if not bool(sol.converged) and backlash:
         # the integration from ``state`` failed already: straight to the homotopy
         sol = backlash_start(problem, omega) if state is None else backlash_homotopy(
             problem, omega)
-    return sol.y, int(sol.result)
+    return sol.y, sol.result
 
 
 def backlash_start(problem, omega) -> _hb.HBSolution:
@@ -88,7 +89,7 @@ def backlash_start(problem, omega) -> _hb.HBSolution:
     homotopy in backlash 0 -> b (:func:`backlash_homotopy`, a continuation of a few
     hundred points at the full K, far slower)."""
     sol = settled_start(problem, omega)
-    if int(sol.result) == _hb.CONVERGED:
+    if bool(sol.converged):
         return sol
     return backlash_homotopy(problem, omega)
 
@@ -98,8 +99,8 @@ def settled_start(problem, omega, state=None) -> _hb.HBSolution:
     stable one, as a test rig's response settles after a jump), from ``state`` ``(x0,
     v0)`` or the static contact state (``time_domain.simulate``: Dopri8 at
     :data:`SETTLE_RTOL`, at most :data:`SETTLE_PERIODS` base periods; the last ``eta``
-    periods give the harmonics). A solver failure is returned as a ``MAX_STEPS``
-    solution at the linear guess."""
+    periods give the harmonics). A solver failure is returned as a
+    ``nonlinear_max_steps_reached`` solution at the linear guess."""
     K, eta = problem.settings.n_harmonics, problem.settings.eta
     settings = _time_domain.TimeDomain(
         rtol=SETTLE_RTOL, atol=SETTLE_RTOL, periodic_tol=100 * SETTLE_RTOL,
@@ -109,12 +110,13 @@ def settled_start(problem, omega, state=None) -> _hb.HBSolution:
     tr = _time_domain.simulate(problem.system, omega, x0=x0, v0=v0, settings=settings)
     X = _aft.analysis(tr.x.T, K)
     y = (X / problem.x_scale).reshape(-1)
-    if int(tr.result) > _time_domain.NOT_PERIODIC or not bool(jnp.all(jnp.isfinite(y))):
+    if not bool(tr.integrated) or not bool(jnp.all(jnp.isfinite(y))):
         y = _hb.linear_guess(problem, omega)
         return _hb.HBSolution(X=y.reshape(problem.shape) * problem.x_scale, y=y,
                               omega=jnp.asarray(omega, float),
-                              result=jnp.asarray(_hb.MAX_STEPS),
-                              steps=jnp.asarray(0), residual_norm=jnp.asarray(jnp.inf))
+                              result=RESULTS.nonlinear_max_steps_reached,
+                              stats={"num_steps": jnp.asarray(0),
+                                     "residual_norm": jnp.asarray(jnp.inf)})
     return newton(problem, jnp.asarray(omega), y)
 
 

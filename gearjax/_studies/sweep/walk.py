@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._engine import continuation as _continuation
-from ..._engine import hb as _hb
+from ..._engine.results import RESULTS, result_from_word, result_word
 from . import starts as _starts
 
 MAX_DETOUR = 150
@@ -48,8 +48,9 @@ resolve such impacts anyway. The sweep restarts beyond."""
 MAX_RESTARTS = 100
 """Most branch restarts of one sweep."""
 
-RESTART_STOPS = ("closed_loop", "detour", "step_too_small", "nonfinite", "runaway")
-"""Continuation stops after which a sweep restarts on a new branch."""
+RESTART_STOPS = (RESULTS.closed_loop, RESULTS.detour, RESULTS.step_too_small,
+                 RESULTS.nonfinite, RESULTS.runaway, RESULTS.no_converged_start)
+"""Segment results after which a sweep restarts on a new branch."""
 
 
 @dataclasses.dataclass
@@ -100,7 +101,7 @@ def linear_segments(ctx, walk, log, points, progress) -> None:
             sols = _starts.solve_points(problem, omegas)
             log.add({"type": "batch", "segment": j, "K": K,
                      "omega": np.asarray(omegas, float), "X": np.asarray(sols.X, float),
-                     "result": np.asarray(sols.result, np.int64)})
+                     "result": result_word(sols.result)})
         batch = log.batch(j)
         walk.done += len(batch["omega"])
         if progress:
@@ -112,7 +113,7 @@ def walk_segment(ctx, walk, log, post, *, progress=None, entered=None, key=None,
     """Continue the next segment of ``walk`` (or take it from ``log``, where it is there)
     and decide what follows: the next segment, a restart beyond where the branch was
     left (a segment inserted), or the end. ``entered``: the segment's start ``(y,
-    result code, lambda)``, found already; ``key(j)``: segment ``j``'s name in ``post``;
+    result, lambda)``, found already; ``key(j)``: segment ``j``'s name in ``post``;
     ``cancel``: an event that stops the continuation (:class:`Cancelled`).
     **Returns:** whether the walk goes on."""
     j = len(walk.problems)
@@ -155,8 +156,9 @@ def walk_segment(ctx, walk, log, post, *, progress=None, entered=None, key=None,
         walk.previous = (K, pts[-1]["y"], pts[-1]["lam"], before)
         far = max(pts, key=lambda p: p["lam"] * direction)
         walk.furthest = (K, far["y"], far["lam"])
-    walk.failed = walk.failed + 1 if seg_stop.startswith("no converged") else 0
-    restartable = seg_stop in RESTART_STOPS or seg_stop.startswith("no converged")
+    result = result_from_word(seg_stop)
+    walk.failed = walk.failed + 1 if bool(result == RESULTS.no_converged_start) else 0
+    restartable = any(bool(result == r) for r in RESTART_STOPS)
     if restartable and len(walk.restarts) < MAX_RESTARTS and walk.done < ctx.max_points:
         lams = [ctx.lam(f_a)] + [p["lam"] for p in pts]
         reached = (max if direction > 0 else min)(lams) * ctx.from_hz
@@ -174,7 +176,7 @@ def walk_segment(ctx, walk, log, post, *, progress=None, entered=None, key=None,
             return False
         walk.fresh.add(j + 1)
         return True
-    if seg_stop != "reached_end":
+    if not bool(result == RESULTS.reached_end):
         walk.stop = seg_stop
         return False
     return True
@@ -188,9 +190,11 @@ def continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap,
     state is the saved point with its tangent and step, and the factors of its bordered
     Jacobian rebuilt as the continuation built them (last row: the tangent before), so
     the points that follow are those of an uninterrupted run. ``found()`` is called after
-    each new point went to ``log``; ``entered``: the start ``(y, result code, lambda)``
+    each new point went to ``log``; ``entered``: the start ``(y, result, lambda)``
     where it was found already (``starts.enter_segment`` otherwise). **Returns:** why the
-    segment stopped (``continuation.STOP_REASONS``, or no converged start)."""
+    segment stopped: the word (:func:`~gearjax._engine.results.result_word`) of a
+    ``RESULTS`` item; ``no_converged_start`` is written "no converged start at F Hz
+    (why)"."""
     have = log.points(j)
     offset = max(len(have) - 1, 0)
     direction = float(np.sign(lam_b - lam_a))
@@ -232,28 +236,28 @@ def continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap,
                 raise ClosedLoop
             trace.add(z, t)
         if runaway is not None and ran_away(param.problem, y, runaway):
-            return "runaway"
-        return "detour" if detour(lam) and (lam - lam_b) * direction < 0 else None
+            return RESULTS.runaway
+        return RESULTS.detour if detour(lam) and (lam - lam_b) * direction < 0 else None
 
     if not have:
         y, code, lam = entered or _starts.enter_segment(param.problem, previous, lam_a,
                                                         float(param.omega_ref), guess)
-        if code != _hb.CONVERGED:
-            return f"no converged start at {f_a:.1f} Hz ({_hb.RESULTS[code]})"
-        return _continuation.continue_branch(param, y, lam, lam_b, settings, max_points=cap,
-                                             on_point=on_point).stop
+        if not bool(code == RESULTS.successful):
+            return f"no converged start at {f_a:.1f} Hz ({result_word(code)})"
+        return result_word(_continuation.continue_branch(
+            param, y, lam, lam_b, settings, max_points=cap, on_point=on_point).result)
     last = have[-1]
     # why continue_branch stopped after the last saved point, in its order of checks
     if (last["lam"] - lam_b) * direction >= 0:
-        return "reached_end"
+        return result_word(RESULTS.reached_end)
     if trace is not None and trace.closed:
-        return "closed_loop"
+        return result_word(RESULTS.closed_loop)
     if runaway is not None and ran_away(param.problem, last["y"], runaway):
-        return "runaway"
+        return result_word(RESULTS.runaway)
     if detoured:
-        return "detour"
+        return result_word(RESULTS.detour)
     if len(have) >= cap:
-        return "max_points"
+        return result_word(RESULTS.max_points)
     # one saved point: the start state is rebuilt from it exactly as it was first built
     state = None if len(have) == 1 else arc_state(
         param, jnp.asarray(last["y"]), jnp.asarray(last["lam"], float),
@@ -261,11 +265,11 @@ def continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap,
         jnp.asarray(last["h"], float), jnp.asarray(have[-2]["ty"]),
         jnp.asarray(have[-2]["tlam"], float), single=settings.single)
     try:
-        return _continuation.continue_branch(param, jnp.asarray(last["y"]), last["lam"], lam_b,
-                                             settings, max_points=cap - len(have) + 1,
-                                             on_point=on_point, state=state).stop
+        return result_word(_continuation.continue_branch(
+            param, jnp.asarray(last["y"]), last["lam"], lam_b, settings,
+            max_points=cap - len(have) + 1, on_point=on_point, state=state).result)
     except ClosedLoop:
-        return "closed_loop"
+        return result_word(RESULTS.closed_loop)
 
 
 class ClosedLoop(Exception):

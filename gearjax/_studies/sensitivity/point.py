@@ -1,0 +1,258 @@
+"""The sensitivity study at one frequency: the gear prepared once (:class:`GearPoint`),
+the point solved as a sweep would start it, and its derivatives or the reason it has
+none (:class:`Sensitivity`).
+
+The derivative itself and the rule that refuses it are :mod:`.implicit`'s; the
+parameters and responses :mod:`.family`'s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ..._engine import hb as _hb
+from ..._engine.responses import mesh_responses, static_mesh_forces
+from ..._engine.results import RESULTS, result_word
+from ..._engine.system import System
+from ..._errors import bad_argument
+from ..._gear.case import gear_case
+from ..._gear.train import Train
+from .. import harmonics as _harmonics
+from ..sweep import backlash_start
+from .family import RESPONSE_UNITS, GearFamily, MeshResponse, check_paths, response_field
+from .implicit import (FOLD_TOL, SensitivityRefused, check_point, implicit_gradient,
+                       point_status, solve_at)
+
+
+@dataclasses.dataclass(frozen=True)
+class Sensitivity:
+    """Derivatives of one response of one mesh at one frequency.
+
+    **Fields:**
+
+    - ``gear``, ``reference_stage``, ``mesh_frequency_hz`` (reference stage, Hz),
+      ``omega`` (base, rad/s), ``harmonics`` (K), ``linear``;
+    - ``response`` (``rms`` | ``max`` | ``dlf``), ``unit``, ``mesh`` (name such as
+      ``1.sp1``), ``value``: the response there (NaN when not converged);
+    - ``result``: ``ok``, ``not_converged``, ``fold`` or ``unstable``; ``message``:
+      why a point was refused (``None`` when ok); ``converged``, ``stable``,
+      ``fold_distance`` (:func:`point_status`), ``fold_tol``;
+    - ``paths``: the TOML paths; ``values``: their values (file units);
+      ``derivative``: ``dR/dp`` per unit of each path (``None`` when refused);
+      ``normalised``: ``(p / R) dR/dp`` (NaN where ``p`` or ``R`` is 0);
+      ``partial``: the explicit part ``dr/dp`` at fixed solution;
+    - ``meshes``: every mesh name; ``mesh_values``: the response of every mesh.
+    """
+
+    gear: str
+    reference_stage: str
+    mesh_frequency_hz: float
+    omega: float
+    harmonics: int
+    linear: bool
+    response: str
+    unit: str
+    mesh: str
+    value: float
+    result: str
+    message: str | None
+    converged: bool
+    stable: bool | None
+    fold_distance: float | None
+    fold_tol: float
+    paths: tuple[str, ...]
+    values: np.ndarray
+    derivative: np.ndarray | None
+    normalised: np.ndarray | None
+    partial: np.ndarray | None
+    meshes: tuple[str, ...]
+    mesh_values: np.ndarray
+
+    @property
+    def ok(self) -> bool:
+        return self.result == "ok"
+
+    def ranking(self) -> list[int]:
+        """Indices of ``paths`` by decreasing ``|normalised|`` (undefined ones last, by
+        decreasing ``|derivative|``)."""
+        if self.derivative is None:
+            return list(range(len(self.paths)))
+        norm = np.abs(self.normalised)
+        key = [(0, -norm[k]) if np.isfinite(norm[k]) else (1, -abs(self.derivative[k]))
+               for k in range(len(self.paths))]
+        return sorted(range(len(self.paths)), key=lambda k: key[k])
+
+
+class GearPoint:
+    """A gear prepared at fixed harmonics for the point and band studies: family, nominal
+    parameters, reference stage.
+
+    **Arguments:** ``train``; ``gear``, ``stage``, ``linear``: as :func:`sensitivity`
+    (:func:`~gearjax._gear.case.gear_case`); ``paths``: TOML paths or ``None``
+    (:func:`~gearjax._studies.sensitivity.check_paths`); ``harmonics``: K, or ``None``
+    for the sweep's rule at the lowest of ``f_hz``; ``f_hz``: the reference-stage mesh
+    frequency or frequencies (Hz) to be solved.
+
+    **Attributes:** ``gear`` (name), ``ref`` (reference stage), ``mu_ref``, ``paths``,
+    ``family`` (:class:`~gearjax._studies.sensitivity.GearFamily`), ``theta`` ``(p,)``,
+    ``settings``, ``problem`` and ``system`` at ``theta``, ``has_backlash``.
+
+    **Raises:** ``ArgumentError`` naming ``paths`` or ``harmonics``; ``TrainError`` as
+    :func:`~gearjax._gear.case.gear_case` and the harmonics rules.
+    """
+
+    def __init__(self, train: Train, gear, paths, stage, linear, harmonics, f_hz):
+        case = gear_case(train, gear, stage, linear)
+        self.ref, self.mu_ref = case.stage, case.mu_ref
+        self.gear, self.train, self.linear = case.gear.name, train, linear
+        self.paths = tuple(leaf.path for leaf in check_paths(train, paths, gear=self.gear,
+                                                              linear=linear))
+        if harmonics is not None and (int(harmonics) != harmonics or harmonics < 1):
+            raise bad_argument("harmonics", harmonics, "must be an integer >= 1")
+        self.family = GearFamily.of(train, self.paths, self.gear, linear)
+        self.theta = self.family.theta()
+        f = np.atleast_1d(np.asarray(f_hz, dtype=float))
+        if harmonics is None:
+            harmonics = _harmonics.harmonics_rule(
+                float(f.min()) / self.mu_ref, _harmonics.excitation_floor(case.system),
+                cutoff_hz=_harmonics.response_cutoff_hz(case.system))
+        else:
+            _harmonics.require_harmonics(case.system, harmonics)
+        _harmonics.require_size(case.system, int(harmonics), mu=case.mu)
+        self.settings = _hb.HarmonicBalance(n_harmonics=int(harmonics))
+        self.problem = _problem_jit(self.family, self.theta, self.settings)
+        self.system = self.problem.system
+        self.has_backlash = self.system.has_backlash
+
+    def omega(self, f_hz: float) -> float:
+        """The base frequency (rad/s) of the reference-stage mesh frequency ``f_hz`` (Hz)."""
+        return 2 * math.pi * float(f_hz) / self.mu_ref
+
+    def solve(self, f_hz: float, X0=None) -> _hb.HBSolution:
+        """Newton from ``X0`` (or the linear guess); with backlash, when Newton from the
+        linear guess fails, :func:`~gearjax._studies.sweep.backlash_start` (as the sweep
+        starts a branch)."""
+        w = jnp.asarray(self.omega(f_hz))
+        sol = solve_at(self.family, self.theta, self.settings, w, X0)
+        if not bool(sol.converged) and X0 is not None:
+            sol = solve_at(self.family, self.theta, self.settings, w, None)
+        if not bool(sol.converged) and self.has_backlash:
+            sol = backlash_start(self.problem, w)
+        return sol
+
+    def differentiate(self, sol, f_hz, response, fold_tol):
+        """``(PointGradient, stable, fold_distance)`` at a converged ``sol``; the caller
+        decides with :func:`~gearjax._studies.sensitivity.check_point`."""
+        omega = jnp.asarray(self.omega(f_hz))
+        pg = implicit_gradient(self.family, self.theta, self.settings, sol.y, omega, response)
+        stable, distance = point_status(self.problem, sol.X, omega)
+        return pg, bool(stable), float(distance)
+
+
+@eqx.filter_jit
+def _problem_jit(family, theta, settings):
+    return _hb.hb_problem(family(theta), settings)
+
+
+@eqx.filter_jit
+def _responses_jit(problem, X, omega):
+    return mesh_responses(problem, X, omega, static_mesh_forces(problem.system))
+
+
+def mesh_index(system: System, mesh: str) -> int:
+    """The index of the mesh named ``mesh`` (``1.sp1``) in ``system``.
+
+    **Raises:** ``ArgumentError`` naming ``mesh`` for no such mesh."""
+    names = list(system.mesh_labels)
+    if mesh not in names:
+        raise bad_argument("mesh", mesh, f"no such mesh; meshes are {', '.join(names)}")
+    return names.index(mesh)
+
+
+def sensitivity(
+    train: Train,
+    gear: str | None = None,
+    at_hz: float = 3000.0,
+    *,
+    response: str = "rms",
+    mesh: str | None = None,
+    paths: Sequence[str] | None = None,
+    stage: str | None = None,
+    linear: bool = False,
+    harmonics: int | None = None,
+    fold_tol: float = FOLD_TOL,
+) -> Sensitivity:
+    """Derivatives of a mesh response at one frequency with respect to train parameters.
+
+    **Arguments:** ``at_hz``: reference-stage mesh frequency (Hz), as in ``sweep``;
+    ``response``: ``rms`` (RMS alternating force, N), ``max`` (peak ``|F|``, N) or
+    ``dlf`` (dynamic load factor); ``mesh``: mesh name (``1.sp1``; default: the mesh
+    with the largest response); ``paths``: TOML paths (default: every continuous path
+    that changes the gear's system, :func:`~gearjax.continuous_paths` of the gear);
+    ``stage``, ``linear``: as ``sweep``;
+    ``harmonics``: K (default: the sweep's rule at ``at_hz``); ``fold_tol``: the fold
+    test on ``min |mu - 1|`` (:func:`~gearjax._studies.sensitivity.point_status`,
+    :data:`~gearjax._studies.sensitivity.FOLD_TOL`).
+
+    The point is solved from the linear in-contact guess (with backlash, if Newton fails,
+    from the orbit a time integration settles to, else by the backlash homotopy), so with
+    coexisting solutions it is the one a sweep starting at ``at_hz`` would start on.
+
+    **Returns:** :class:`Sensitivity`; a refused point has ``result`` ``not_converged``,
+    ``fold`` or ``unstable``, a ``message`` naming the frequency, and no derivative.
+
+    **Raises:** ``ArgumentError`` (a ``TrainError``) naming the argument for bad
+    ``paths``, ``response``, ``mesh``, ``at_hz`` or ``harmonics``; ``TrainError`` as
+    :func:`~gearjax._gear.case.gear_case` for the gear and stage.
+    """
+    field = response_field(response)
+    if not (isinstance(at_hz, int | float) and at_hz > 0 and math.isfinite(at_hz)):
+        raise bad_argument("at_hz", at_hz, "must be a positive mesh frequency in Hz")
+    gp = GearPoint(train, gear, paths, stage, linear, harmonics, at_hz)
+    j = None if mesh is None else mesh_index(gp.system, mesh)
+    sol = gp.solve(at_hz)
+    omega = gp.omega(at_hz)
+    converged = bool(sol.converged)
+    values = np.asarray(getattr(_responses_jit(gp.problem, sol.X, jnp.asarray(omega)), field))
+    if not converged:
+        values = np.full_like(values, np.nan)
+    if j is None:
+        j = int(np.nanargmax(values)) if np.any(np.isfinite(values)) else 0
+    common = dict(gear=gp.gear, reference_stage=gp.ref, mesh_frequency_hz=float(at_hz),
+                  omega=omega, harmonics=gp.settings.n_harmonics, linear=linear,
+                  response=response, unit=RESPONSE_UNITS[response], fold_tol=fold_tol,
+                  mesh=gp.system.mesh_labels[j], value=float(values[j]), converged=converged,
+                  paths=gp.paths, values=np.asarray(gp.theta),
+                  meshes=tuple(gp.system.mesh_labels), mesh_values=values)
+    refused = dict(derivative=None, normalised=None, partial=None)
+    if not converged:
+        return Sensitivity(**common, **refused, result=result_word(RESULTS.not_converged),
+                           stable=None,
+                           fold_distance=None,
+                           message=f"the harmonic balance did not converge at {at_hz:g} Hz "
+                                   f"({result_word(sol.result)}): no derivative")
+    pg, stable, distance = gp.differentiate(sol, at_hz, MeshResponse(field=field, mesh=j),
+                                            fold_tol)
+    status = dict(stable=stable, fold_distance=distance)
+    try:
+        check_point(stable, distance, f"{at_hz:g} Hz", fold_tol)
+    except SensitivityRefused as e:
+        return Sensitivity(**common, **refused, **status, result=e.result, message=str(e))
+    d = np.asarray(pg.gradient)
+    return Sensitivity(**common, **status, result="ok", message=None, derivative=d,
+                       normalised=normalise(d, np.asarray(gp.theta), float(pg.value)),
+                       partial=np.asarray(pg.partial))
+
+
+def normalise(derivative: np.ndarray, values: np.ndarray, response: float) -> np.ndarray:
+    """``(p / R) dR/dp``; NaN where ``p == 0`` or ``R == 0`` (no relative change)."""
+    ok = (values != 0) & (response != 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(ok, derivative * values / (response if response != 0 else 1.0), np.nan)
+
