@@ -11,7 +11,10 @@ difference between the two. Runs on whatever JAX uses by default (CPU, or a GPU
 when one is present; nothing here needs one); ``--shard`` also spreads the batch over
 every device (:func:`gearjax.batched_rms`).
 
-    python benchmarks/design_batch.py [--designs 32] [--frequencies 8] [--harmonics 16]
+    python benchmarks/design_batch.py [--designs 32] [--frequencies 8] [--harmonics K]
+
+``--harmonics`` defaults to the fewest that hold the train's stiffness excitation
+(:func:`gearjax.excitation_floor`, 32 for the paper's first gear).
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ def main() -> None:
     p = argparse.ArgumentParser()
     p.add_argument("--designs", type=int, default=32)
     p.add_argument("--frequencies", type=int, default=8)
-    p.add_argument("--harmonics", type=int, default=16)
+    p.add_argument("--harmonics", type=int, default=None)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--shard", action="store_true", help="also shard over every device")
     a = p.parse_args()
@@ -61,6 +64,8 @@ def main() -> None:
     pick = sets[rng.choice(len(sets), a.designs, replace=False)]
     thetas = np.column_stack([pick[:, 1:], rng.uniform(0, 360, (a.designs, 2))])
     family = gj.GearFamily.of(train, PATHS, "first", linear=True)
+    if a.harmonics is None:
+        a.harmonics = gj.excitation_floor(gj.assemble(train, "first"))
     settings = gj.HarmonicBalance(n_harmonics=a.harmonics)
     f = np.geomspace(2000.0, 15000.0, a.frequencies)
     omegas = jnp.asarray(2 * math.pi * f / 7)

@@ -117,6 +117,8 @@ from ._studies.sweep import (
     SweepResult as SweepResult,
     backlash_start as backlash_start,
     responses_and_stability as responses_and_stability,
+    coexisting_bands as coexisting_bands,
+    progress_bar as progress_bar,
     progress_printer as progress_printer,
     solve_hb_points as solve_hb_points,
     sweep as sweep,

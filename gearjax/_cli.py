@@ -666,17 +666,19 @@ def _sweep_cmd(args, train, notes) -> int:
 
 def _sweep_run(args, train, notes, journal) -> int:
     from ._io.results import save_results
-    from ._studies.sweep import progress_printer, summary_json, sweep
+    from ._studies.sweep import progress_bar, summary_json, sweep
 
     if args.resume and journal.exists():
         _stderr(f"sweep: resuming from {journal}")
     g = train.gear(args.gear)
-    result = sweep(train, g.name, args.from_hz, args.to_hz, stage=args.stage,
-                   linear=args.linear, harmonics=args.harmonics, eta=args.eta,
-                   max_step_hz=args.max_step, points=args.points,
-                   max_points=args.max_points, smoothing=args.smoothing,
-                   progress=progress_printer(sys.stderr), journal=journal, resume=args.resume,
-                   command=args.command_line)
+    # a bar on a terminal; under --json or off a terminal only its final line
+    with progress_bar(args.from_hz, args.to_hz, sys.stderr, quiet=args.json) as bar:
+        result = sweep(train, g.name, args.from_hz, args.to_hz, stage=args.stage,
+                       linear=args.linear, harmonics=args.harmonics, eta=args.eta,
+                       max_step_hz=args.max_step, points=args.points,
+                       max_points=args.max_points, smoothing=args.smoothing,
+                       progress=bar, journal=journal, resume=args.resume,
+                       command=args.command_line)
     ds = result.dataset
     if args.out:
         save_results(ds, args.out)
@@ -703,6 +705,9 @@ def _sweep_run(args, train, notes, journal) -> int:
         f"{a:.0f}-{b:.0f} K={k}" for a, b, k in result.segments))
     if result.folds_hz:
         print("folds at " + ", ".join(f"{f:.1f}" for f in result.folds_hz) + " Hz")
+    if out["coexisting_hz"]:
+        print("coexisting stable states (jumps up and down differ) over " + ", ".join(
+            f"{a:.1f}-{b:.1f}" for a, b in out["coexisting_hz"]) + " Hz")
     for r in result.restarts:
         print(f"branch left at {r['from_hz']:.1f} Hz ({r['reason']}); new branch from "
               f"{r['at_hz']:.1f} Hz")

@@ -228,63 +228,185 @@ class SeparationBranch:
 
 
 def separation_branches(ds) -> list[SeparationBranch]:
-    """Split a sweep Dataset into branches between folds (where the frequency turns),
-    so each can be drawn against frequency; a sweep without folds is one branch.
+    """Split a sweep Dataset into branches between folds (where the frequency turns)
+    and branch restarts (where the ``branch`` number changes, a jump), so each can be
+    drawn against frequency; a sweep without either is one branch.
 
-    Points where the frequency turns belong to both neighbouring branches.
+    Points where the frequency turns belong to both neighbouring branches; a restart
+    shares no point.
     """
     f = np.asarray(ds["mesh_frequency_hz"], dtype=float)
     sep = np.asarray(ds["separation"], dtype=float)
     stable = np.asarray(ds["stable"]) if "stable" in ds else np.full(f.shape, -1, np.int8)
+    number = np.asarray(ds["branch"]) if "branch" in ds else np.zeros(f.shape, int)
     meshes = tuple(str(m) for m in np.asarray(ds["mesh"]).tolist())
-    d = np.sign(np.diff(f))
-    cuts = [0]
-    for i in range(1, d.size):
-        if d[i] != 0 and d[i - 1] != 0 and d[i] != d[i - 1]:
-            cuts.append(i)
-    cuts.append(f.size - 1)
     out = []
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        idx = np.arange(a, b + 1)
-        out.append(SeparationBranch(points=idx, frequency_hz=f[idx], separation=sep[idx],
-                                    stable=stable[idx], meshes=meshes))
+    starts = [0] + [i for i in range(1, f.size) if number[i] != number[i - 1]] + [f.size]
+    for first, stop in zip(starts[:-1], starts[1:]):
+        d = np.sign(np.diff(f[first:stop]))
+        cuts = [first]
+        for i in range(1, d.size):
+            if d[i] != 0 and d[i - 1] != 0 and d[i] != d[i - 1]:
+                cuts.append(first + i)
+        cuts.append(stop - 1)
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            idx = np.arange(a, b + 1)
+            out.append(SeparationBranch(points=idx, frequency_hz=f[idx],
+                                        separation=sep[idx], stable=stable[idx],
+                                        meshes=meshes))
     return out
 
 
+@dataclasses.dataclass(frozen=True)
+class _SeparationMap:
+    """The separation map on a frequency grid: ``edges_hz`` ``(G + 1,)``; ``values``
+    ``(G, L, m)`` the separation of up to ``L`` states per grid cell, smallest response
+    first (NaN past the ``count`` ``(G,)`` states there); ``unstable`` ``(G,)``: no
+    state there is stable or of unknown stability (the one shown is unstable)."""
+
+    edges_hz: np.ndarray
+    values: np.ndarray
+    count: np.ndarray
+    unstable: np.ndarray
+
+
+def _separation_map(ds, branches: list[SeparationBranch]) -> _SeparationMap:
+    """The states :func:`separation_figure` shows in each cell of a grid over the
+    swept frequencies: every branch covering the cell's centre gives one state (its
+    separation interpolated linearly in frequency between the two points around it,
+    unstable where either is); the states not unstable are kept, or where all are
+    unstable the one with the smallest response; kept states are ordered by response (largest RMS force over
+    the meshes; the mean separation where the Dataset has no ``rms_force``)."""
+    f_all = np.asarray(ds["mesh_frequency_hz"], dtype=float)
+    size = int(np.clip(2 * f_all.size, 200, 2000))
+    lo, hi = float(np.min(f_all)), float(np.max(f_all))
+    if hi == lo:
+        lo, hi = lo - 0.5, hi + 0.5
+    edges = np.linspace(lo, hi, size + 1)
+    centres = 0.5 * (edges[1:] + edges[:-1])
+    response = (np.max(np.asarray(ds["rms_force"], dtype=float), axis=1) if "rms_force" in ds
+                else np.mean(np.asarray(ds["separation"], dtype=float), axis=1))
+    states = [[] for _ in range(size)]  # per cell: (response, separation (m,), stable flag)
+    for br in branches:
+        order = np.argsort(br.frequency_hz, kind="stable")
+        f = br.frequency_hz[order]
+        if f.size == 1:
+            cells = np.array([min(int(np.searchsorted(edges, f[0], "right")) - 1, size - 1)])
+        else:
+            cells = np.where((centres >= f[0]) & (centres <= f[-1]))[0]
+        if cells.size == 0:
+            continue
+        x = centres[cells]
+        sep = np.stack([np.interp(x, f, br.separation[order, j])
+                        for j in range(br.separation.shape[1])], axis=1)
+        resp = np.interp(x, f, response[br.points[order]])
+        right = np.clip(np.searchsorted(f, x), 0, f.size - 1)
+        a, b = br.stable[order][np.clip(right - 1, 0, f.size - 1)], br.stable[order][right]
+        flags = np.where((a == 0) | (b == 0), 0, np.where((a == -1) | (b == -1), -1, 1))
+        for k, g in enumerate(cells):
+            states[g].append((float(resp[k]), sep[k], int(flags[k])))
+    m = len(branches[0].meshes) if branches else 0
+    unstable = np.zeros(size, bool)
+    kept = []
+    for g, here in enumerate(states):
+        shown = [s for s in here if s[2] != 0]
+        if here and not shown:
+            shown, unstable[g] = [min(here, key=lambda s: s[0])], True
+        kept.append(sorted(shown, key=lambda s: s[0]))
+    count = np.array([len(k) for k in kept])
+    values = np.full((size, max(1, int(count.max(initial=0))), m), np.nan)
+    for g, shown in enumerate(kept):
+        for k, s in enumerate(shown):
+            values[g, k] = s[1]
+    return _SeparationMap(edges_hz=edges, values=values, count=count, unstable=unstable)
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``(first, stop)`` of each run of True in ``mask``."""
+    d = np.diff(np.r_[0, mask.astype(int), 0])
+    return list(zip(np.where(d == 1)[0], np.where(d == -1)[0]))
+
+
 def separation_figure(ds, title: str = ""):
-    """Tooth-separation map of a sweep: share of the period each mesh (rows) spends
-    with its teeth apart, against reference-stage mesh frequency, one panel per branch
-    between folds (:func:`separation_branches`); unstable points hatched. **Returns:**
-    the Figure."""
+    """Tooth-separation map of a sweep in one panel: each mesh (rows, by name) against
+    reference-stage mesh frequency (kHz), coloured by the share of the period its
+    teeth spend apart (colour bar, 0 to 1 of the period).
+
+    **Branches** (:func:`separation_branches`) share the panel. At each frequency it
+    shows the states a rig can be found in: those not unstable (stable, or of unknown
+    stability). Where several coexist (between the folds of a jump, or where branches
+    from restarts overlap) every mesh row is split into sub-rows, one per state, the
+    state with the smaller response (largest RMS mesh force) on top; elsewhere the
+    state fills the row. Where every state found is unstable, the one with the
+    smallest response is drawn hatched. Folds (the frequency turning along a branch)
+    are marked above the panel; frequencies no branch reached are grey. Everything
+    else is in the legend below the panel. **Returns:** the Figure."""
     from matplotlib.colors import Normalize
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
     branches = separation_branches(ds)
-    vmax = max(0.05, float(np.nanmax(np.asarray(ds["separation"]))))
+    smap = _separation_map(ds, branches)
+    meshes = branches[0].meshes if branches else ()
+    m, lanes = len(meshes), smap.values.shape[1]
+    vmax = max(0.05, float(np.nanmax(np.asarray(ds["separation"], dtype=float))))
     norm = Normalize(0.0, vmax)
-    fig, axes = _figure(10.0, 0.6 + 2.6 * len(branches), len(branches), 1)
-    mesh_img = None
-    for ax, br in zip(axes[:, 0], branches):
-        order = np.argsort(br.frequency_hz)
-        f = br.frequency_hz[order] / 1e3
-        edges = _edges(f)
-        mesh_img = ax.pcolormesh(edges, np.arange(len(br.meshes) + 1) - 0.5,
-                                 br.separation[order].T, norm=norm, cmap="magma_r",
-                                 shading="flat")
-        for k in np.where(br.stable[order] == 0)[0]:
-            ax.axvspan(edges[k], edges[k + 1], facecolor="none", edgecolor="0.3",
-                       hatch="///", lw=0)
-        ax.set_yticks(range(len(br.meshes)))
-        ax.set_yticklabels(br.meshes, fontsize=6)
-        ax.invert_yaxis()
-        way = "up" if br.frequency_hz[-1] >= br.frequency_hz[0] else "down"
-        unstable = int(np.sum(br.stable == 0))
-        ax.set_title(f"branch {br.frequency_hz[0]:.0f} -> {br.frequency_hz[-1]:.0f} Hz "
-                     f"(continuation going {way}; {len(br.points)} points, "
-                     f"{unstable} unstable, hatched)", fontsize=8)
-        ax.set_ylabel("mesh", fontsize=8)
-    axes[-1, 0].set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
-    fig.colorbar(mesh_img, ax=list(axes[:, 0]), label="share of period in separation",
-                 shrink=0.9)
+    fig, axes = _figure(10.0, 2.2 + 0.24 * m)
+    ax = axes[0, 0]
+    # image rows: mesh i, sub-row l; a cell with c states gives state k the sub-rows
+    # from k L / c to (k + 1) L / c
+    image = np.full((m * lanes, smap.count.size), np.nan)
+    for c in np.unique(smap.count[smap.count > 0]):
+        cells = np.where(smap.count == c)[0]
+        for k in range(c):
+            for sub in range(k * lanes // c, (k + 1) * lanes // c):
+                image[sub::lanes, cells] = smap.values[cells, k].T
+    f_edges = smap.edges_hz / 1e3
+    ax.set_facecolor("0.85")
+    img = ax.pcolormesh(f_edges, np.arange(m * lanes + 1) / lanes - 0.5,
+                        np.ma.masked_invalid(image), norm=norm, cmap="magma_r",
+                        shading="flat")
+    for a, b in _runs(smap.unstable):
+        ax.axvspan(f_edges[a], f_edges[b], facecolor="none", edgecolor="0.25",
+                   hatch="///", lw=0)
+    split = _runs(smap.count > 1)
+    for a, b in split:
+        for i in range(m):
+            for sub in range(1, lanes):
+                ax.plot([f_edges[a], f_edges[b]], [i - 0.5 + sub / lanes] * 2, color="white",
+                        lw=0.6)
+    stages = [name.split(".")[0] for name in meshes]
+    for i in range(1, m):
+        boundary = stages[i] != stages[i - 1]
+        ax.axhline(i - 0.5, color="k" if boundary else "white", lw=1.0 if boundary else 0.4)
+    folds = [br.frequency_hz[-1] for br, nxt in zip(branches[:-1], branches[1:])
+             if br.points[-1] == nxt.points[0]]
+    if folds:
+        ax.plot(np.asarray(folds) / 1e3, np.full(len(folds), 1.0), "v", color="C0", ms=6,
+                transform=ax.get_xaxis_transform(), clip_on=False)
+    ax.set_yticks(range(m))
+    ax.set_yticklabels(meshes, fontsize=7)
+    ax.set_ylim(m - 0.5, -0.5)
+    ax.set_xlim(f_edges[0], f_edges[-1])
+    ax.set_ylabel("mesh")
+    ax.set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
+    fig.colorbar(img, ax=ax, label="time in separation (share of period)", shrink=0.95)
+    handles = []
+    if folds:
+        handles.append(Line2D([], [], ls="", marker="v", color="C0", ms=6,
+                              label="fold: the branch turns back in frequency"))
+    if split:
+        handles.append(Patch(facecolor="0.6", edgecolor="white",
+                             label=f"row split: {lanes} states coexist, the top one with "
+                                   "the smaller response"))
+    if np.any(smap.unstable):
+        handles.append(Patch(facecolor="none", edgecolor="0.25", hatch="///",
+                             label="no stable state found: the smallest unstable one"))
+    if np.any(smap.count == 0):
+        handles.append(Patch(facecolor="0.85", label="no state found (between branches)"))
+    if handles:
+        fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=7,
+                   frameon=False)
     fig.suptitle(title or "tooth separation per mesh", fontsize=10)
     return fig
 

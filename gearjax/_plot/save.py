@@ -24,12 +24,15 @@ WHAT = {"rms": ("rms_force", "RMS mesh force (N)"), "dlf": ("dlf", "dynamic load
 def plot_mode_shapes(result: ModalResult, path: str, title: str = "", classes=("elastic",)):
     """Bar chart of each distinct mode's shape (one panel per frequency), saved to ``path``.
 
-    Repeated modes get one panel (the solver's first basis vector) marked ``xN``.
+    Bars: each coordinate's rotation (rad) scaled so the largest is 1, central members
+    blue and planets (rotation relative to their carrier) orange, as the legend below
+    says. Repeated modes get one panel (the solver's first basis vector) marked ``xN``.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
 
     chosen, k = [], 0
     modes = [m for m in result.modes if m.cls in classes]
@@ -38,8 +41,8 @@ def plot_mode_shapes(result: ModalResult, path: str, title: str = "", classes=("
         k += modes[k].multiplicity
     cols = min(4, max(1, len(chosen)))
     rows = math.ceil(len(chosen) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 2.8 * rows), squeeze=False,
-                             sharey=True)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 0.5 + 2.9 * rows),
+                             squeeze=False, sharey=True, layout="constrained")
     for ax, m in zip(axes.flat, chosen):
         labels = list(m.shape)
         values = np.array([m.shape[l] for l in labels])
@@ -51,10 +54,15 @@ def plot_mode_shapes(result: ModalResult, path: str, title: str = "", classes=("
         tag = f" x{m.multiplicity}" if m.multiplicity > 1 else ""
         fam = f"planet {m.stage}" if m.family == "planet" else m.family
         ax.set_title(f"{m.hz / 1e3:.3f} kHz{tag} ({fam})", fontsize=8)
+        ax.set_xlabel("coordinate", fontsize=8)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("rotation (largest = 1)", fontsize=8)
     for ax in list(axes.flat)[len(chosen):]:
         ax.set_visible(False)
+    fig.legend(handles=[Patch(color="tab:blue", label="central member (sun, ring, carrier)"),
+                        Patch(color="tab:orange", label="planet, relative to its carrier")],
+               loc="outside lower center", ncol=2, fontsize=7, frameon=False)
     fig.suptitle(title or "mode shapes (largest coordinate = 1)", fontsize=9)
-    fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
@@ -66,6 +74,8 @@ def plot_sweep(ds, path: str, what: str = "rms", title: str = ""):
     period) or ``torque`` (mean transmitted torque, N m). One panel per stage and mesh
     side, the planets' curves overlaid; stable solid, unstable dashed, unknown dotted.
     """
+    from matplotlib.lines import Line2D
+
     var, label = WHAT[what]
     f = np.asarray(ds["mesh_frequency_hz"]) / 1e3
     stable = np.asarray(ds["stable"]) if "stable" in ds else np.full(f.shape, -1)
@@ -73,20 +83,33 @@ def plot_sweep(ds, path: str, what: str = "rms", title: str = ""):
     fig, axes, panels = _mesh_panels(ds, label)
     for ax, first, meshes in panels:
         for j in meshes:
-            y = np.asarray(ds[var])[:, j]
             planet = int(ds["planet"][j])
-            for b in np.unique(branch):  # branches are not joined to each other
-                sel = branch == b
-                for flag, style in ((1, "-"), (0, "--"), (-1, ":")):
-                    on = stable[sel] == flag
-                    on[1:] |= stable[sel][:-1] == flag  # each run reaches the next point
-                    ax.plot(f[sel], np.where(on, y[sel], np.nan), style, lw=1.0,
-                            color=f"C{(planet - 1) % 10}",  # one colour per planet
-                            label=(f"planet {planet}" if flag == 1 and first and b == branch[0]
-                                   else None))
+            _branch_lines(ax, f, np.asarray(ds[var])[:, j], stable, branch,
+                          color=f"C{(planet - 1) % 10}",  # one colour per planet
+                          label=f"planet {planet}" if first else None)
         values = np.asarray(ds[var])[:, meshes]
         clip_to_stable(ax, values, values[stable == 1])
-    _finish(fig, axes, ds, path, title or "frequency response (solid stable, dashed unstable)")
+    styles = [Line2D([], [], ls=ls, color="0.3", lw=1.0, label=name)
+              for flag, ls, name in ((1, "-", "stable"), (0, "--", "unstable"),
+                                     (-1, ":", "stability unknown")) if np.any(stable == flag)]
+    _finish(fig, axes, ds, path, title or "frequency response (solid stable, dashed unstable)",
+            styles)
+
+
+def _branch_lines(ax, f, y, stable, branch, color, label=None) -> None:
+    """A response ``y`` against ``f`` in the order swept, one line per ``branch`` number
+    (branches are not joined to each other), solid where ``stable`` is 1, dashed where 0,
+    dotted where -1 (unknown); ``label`` on the first line drawn."""
+    for b in dict.fromkeys(branch.tolist()):
+        sel = branch == b
+        for flag, style in ((1, "-"), (0, "--"), (-1, ":")):
+            on = stable[sel] == flag
+            if not np.any(on):
+                continue
+            on[1:] |= stable[sel][:-1] == flag  # each run reaches the next point
+            ax.plot(f[sel], np.where(on, y[sel], np.nan), style, lw=1.0, color=color,
+                    label=label)
+            label = None
 
 
 def clip_to_stable(ax, values, stable_values, factor: float = 1.5, corner: str = "right"
@@ -120,8 +143,8 @@ def _mesh_panels(ds, ylabel: str):
     import matplotlib.pyplot as plt
 
     stages = list(dict.fromkeys(np.asarray(ds["stage"]).tolist()))
-    fig, axes = plt.subplots(len(stages), 2, figsize=(10, 3.2 * len(stages)), squeeze=False,
-                             sharex=True)
+    fig, axes = plt.subplots(len(stages), 2, figsize=(10, 0.6 + 3.2 * len(stages)),
+                             squeeze=False, sharex=True, layout="constrained")
     panels = []
     for r, stage in enumerate(stages):
         for c, side in enumerate(("sun", "ring")):
@@ -135,15 +158,20 @@ def _mesh_panels(ds, ylabel: str):
     return fig, axes, panels
 
 
-def _finish(fig, axes, ds, path, title: str) -> None:
-    """Frequency labels, legend and title; save to ``path`` and close."""
+def _finish(fig, axes, ds, path, title: str, styles=()) -> None:
+    """Frequency labels, title, and one legend below the panels (the first panel's
+    entries, one per planet, then ``styles``: proxy artists of the line and marker
+    styles); save to ``path`` and close."""
     import matplotlib.pyplot as plt
 
     for ax in axes[-1]:
         ax.set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
-    axes[0, 0].legend(fontsize=7)
+    handles = axes[0, 0].get_legend_handles_labels()[0] + list(styles)
+    if handles:
+        fig.legend(handles=handles, loc="outside lower center",
+                   ncol=len(handles) if len(handles) <= 5 else -(-len(handles) // 2),
+                   fontsize=7, frameon=False)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
@@ -168,8 +196,12 @@ def plot_points(ds, path: str, line=None, title: str = "", what: str = "rms"):
     ``what`` as :func:`plot_sweep` (default RMS mesh force). One panel per stage and
     mesh side, one colour per planet; open circles are converged points, crosses
     points that did not converge (e.g. an integration that did not settle to the base
-    period). Meshes are matched by name.
+    period). Meshes are matched by name. ``line``: a sweep (a ``branch`` variable) is
+    drawn per branch in the order swept, solid stable and dashed unstable; other points
+    are joined in frequency order. The legend is below the panels.
     """
+    from matplotlib.lines import Line2D
+
     var, ylabel = WHAT[what]
     f_pts = np.asarray(ds["mesh_frequency_hz"]) / 1e3
     settled = np.asarray(ds["converged"])
@@ -180,17 +212,37 @@ def plot_points(ds, path: str, line=None, title: str = "", what: str = "rms"):
             color = f"C{(int(ds['planet'][j]) - 1) % 10}"  # one colour per planet
             label = f"planet {int(ds['planet'][j])}" if first else None
             if line is not None:
-                f_line = np.asarray(line["mesh_frequency_hz"]) / 1e3
-                order = np.argsort(f_line)
                 k = np.asarray(line["mesh"]).tolist().index(names[j])
-                ax.plot(f_line[order], np.asarray(line[var])[order, k], "-", lw=1.0,
-                        color=color, label=label)
+                _line_of(ax, line, np.asarray(line[var])[:, k], color, label)
                 label = None
             y = np.asarray(ds[var])[:, j]
             ax.plot(f_pts[settled], y[settled], "o", mfc="none", ms=6, color=color, label=label)
             ax.plot(f_pts[~settled], y[~settled], "x", ms=6, color=color)
+    unstable = (line is not None and "branch" in line and "stable" in line
+                and bool(np.any(np.asarray(line["stable"]) == 0)))
+    styles = ([Line2D([], [], color="0.3", lw=1.0, label="harmonic balance"
+                      + (", stable" if unstable else ""))] if line is not None else [])
+    if unstable:
+        styles.append(Line2D([], [], ls="--", color="0.3", lw=1.0,
+                             label="harmonic balance, unstable"))
+    styles.append(Line2D([], [], ls="", marker="o", mfc="none", color="0.3", label="converged"))
+    if np.any(~settled):
+        styles.append(Line2D([], [], ls="", marker="x", color="0.3", label="not converged"))
     _finish(fig, axes, ds, path,
-            title or f"{ylabel} (open circles converged, crosses not)")
+            title or f"{ylabel} (open circles converged, crosses not)", styles)
+
+
+def _line_of(ax, line, y, color, label) -> None:
+    """The harmonic-balance line of :func:`plot_points`: a sweep (a ``branch``
+    variable) in the order swept, per branch and by stability as :func:`plot_sweep`;
+    other points joined in frequency order."""
+    f = np.asarray(line["mesh_frequency_hz"]) / 1e3
+    if "branch" in line:
+        stable = np.asarray(line["stable"]) if "stable" in line else np.full(f.shape, -1)
+        _branch_lines(ax, f, y, stable, np.asarray(line["branch"]), color, label)
+    else:
+        order = np.argsort(f)
+        ax.plot(f[order], y[order], "-", lw=1.0, color=color, label=label)
 
 
 # ------------------------------------------------------------------ saved results
@@ -292,8 +344,8 @@ def plot_optimize(ds, path: str, title: str = ""):
     import matplotlib.pyplot as plt
 
     stages = list(dict.fromkeys(np.asarray(ds["stage"]).tolist()))
-    fig, axes = plt.subplots(len(stages), 1, figsize=(9, 3.0 * len(stages)), squeeze=False,
-                             sharex=True)
+    fig, axes = plt.subplots(len(stages), 1, figsize=(9, 0.8 + 3.0 * len(stages)),
+                             squeeze=False, sharex=True, layout="constrained")
     f = np.asarray(ds["frequency"]) / 1e3
     order = np.argsort(f)
     styles = {"baseline": ("k", "-"), "optimum": ("C3", "-"), "relaxed": ("C0", ":")}
@@ -315,10 +367,10 @@ def plot_optimize(ds, path: str, title: str = ""):
         ax.set_ylabel("largest RMS mesh force (N)", fontsize=8)
         ax.set_title(f"stage {stage} meshes", fontsize=9)
         ax.grid(alpha=0.3, which="both")
-    axes[0, 0].legend(fontsize=7)
+    fig.legend(handles=axes[0, 0].get_legend_handles_labels()[0], loc="outside lower center",
+               ncol=3, fontsize=7, frameon=False)
     axes[-1, 0].set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
     fig.suptitle(title or "phasing optimisation: baseline and optimum", fontsize=10)
-    fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
 

@@ -111,6 +111,6 @@ def test_figures_draw_saved_sweeps():
     branches = _figures.separation_branches(ds)
     assert [list(b.points) for b in branches] == [[0, 1, 2], [2, 3, 4], [4, 5, 6]]
     fig = _figures.separation_figure(ds)
-    assert len(fig.axes) == 4  # three branches and the colour bar
+    assert len(fig.axes) == 2  # one panel for the three branches, and the colour bar
     fig = _figures.response_figure(ds, reference=ds, points=ds.isel(point=[0, 6]), what="torque")
     assert len(fig.axes) == 1

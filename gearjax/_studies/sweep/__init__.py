@@ -35,6 +35,8 @@ from .post import batch_verdict as batch_verdict
 from .post import bifurcations as bifurcations
 from .post import point_rows as point_rows
 from .post import point_rows as responses_and_stability
+from .progress import SweepProgress as SweepProgress
+from .progress import progress_bar as progress_bar
 from .progress import progress_printer as progress_printer
 from .record import SweepLog as SweepLog
 from .starts import backlash_start as backlash_start
@@ -45,6 +47,7 @@ from .starts import solve_points as solve_points
 from .starts import solve_points as solve_hb_points
 from .starts import start_point as start_point
 from .summary import SweepResult as SweepResult
+from .summary import coexisting_bands as coexisting_bands
 from .summary import summary_json as summary_json
 from .walk import MAX_DETOUR as MAX_DETOUR
 from .walk import MAX_RESTARTS as MAX_RESTARTS

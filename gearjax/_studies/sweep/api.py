@@ -20,6 +20,7 @@ from .arguments import check_arguments
 from .context import Context
 from .dataset import point_data, sweep_result_dataset
 from .post import PostStream
+from .progress import with_branches
 from .record import SweepLog, run_fields
 from .summary import SweepResult
 
@@ -55,7 +56,10 @@ def sweep(
     sweep restarts beyond it (:mod:`~gearjax._studies.sweep.walk`); ``smoothing``:
     corner rounding of the backlash relative to it (0: exact piecewise-linear, see
     :func:`gearjax._engine.mesh_force.backlash`); ``progress(points_done,
-    frequency_hz)``: called per point; ``command``: how the sweep was asked for, kept
+    frequency_hz, branches)``: called per point with the points kept so far, the
+    frequency reached (Hz) and the branches begun so far (restarts plus one), the third
+    argument only where ``progress`` takes one (:func:`.progress.with_branches`);
+    ``command``: how the sweep was asked for, kept
     as the dataset's ``command`` attribute (default: empty).
 
     ``journal``: a file (e.g. ``RESULTS.nc.journal``, :func:`gearjax._io.journal.journal_path`)
@@ -129,7 +133,8 @@ def sweep(
               "smoothing": smoothing}
     walk = _walk.Walk(segments=list(segments))
     post = PostStream(F_static)
-    _run_walk(ctx, walk, log, post, linear=linear, points=points, progress=progress)
+    _run_walk(ctx, walk, log, post, linear=linear, points=points,
+              progress=with_branches(progress))
     data = point_data(walk, log, post, ctx, F_static, linear=linear)
     ds = sweep_result_dataset(data, case, F_static=F_static, train_toml=train_toml,
                               solver=solver, folds=walk.folds, stop=walk.stop,

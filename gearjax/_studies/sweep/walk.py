@@ -105,7 +105,7 @@ def linear_segments(ctx, walk, log, points, progress) -> None:
         batch = log.batch(j)
         walk.done += len(batch["omega"])
         if progress:
-            progress(walk.done, float(batch["omega"][-1]) * ctx.mu_ref / (2 * math.pi))
+            progress(walk.done, float(batch["omega"][-1]) * ctx.mu_ref / (2 * math.pi), 1)
 
 
 def walk_segment(ctx, walk, log, post, *, progress=None, entered=None, key=None,
@@ -133,7 +133,7 @@ def walk_segment(ctx, walk, log, post, *, progress=None, entered=None, key=None,
                 raise Cancelled
             post.feed(name, problem, omega_ref, log.points(j))
 
-        start = walk.done
+        start, branches = walk.done, len(walk.restarts) + 1
         previous, guess = walk.handover(j)
         seg_stop = continue_segment(
             log, j, K, param, previous, ctx.lam(f_a), ctx.lam(f_b),
@@ -141,11 +141,12 @@ def walk_segment(ctx, walk, log, post, *, progress=None, entered=None, key=None,
             cap=ctx.max_points - walk.done, f_a=f_a,
             guess=guess, runaway=ctx.runaway,
             max_detour=ctx.max_detour, entered=entered, found=found,
-            progress=(lambda i, lam: progress(start + i + 1, lam * ctx.from_hz))
+            progress=(lambda i, lam: progress(start + i + 1, lam * ctx.from_hz, branches))
             if progress else None)
         log.add({"type": "end", "segment": j, "stop": seg_stop})
     elif progress and log.points(j):  # taken from the journal
-        progress(walk.done + len(log.points(j)), log.points(j)[-1]["lam"] * ctx.from_hz)
+        progress(walk.done + len(log.points(j)), log.points(j)[-1]["lam"] * ctx.from_hz,
+                 len(walk.restarts) + 1)
     seg_stop = log.end(j)["stop"]
     pts = log.points(j)
     post.feed(name, problem, omega_ref, pts)

@@ -1,0 +1,97 @@
+"""Figures people read: one separation map however many branches, labelled axes, and
+legends outside the data."""
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.image
+import numpy as np
+import pytest
+import xarray as xr
+
+from gearjax._plot import figures as _figures
+from gearjax._plot import save as _save
+
+
+def zigzag_sweep(turns: int):
+    """A made-up sweep whose frequency turns ``turns`` times (folds), with a restart
+    (``branch`` 1) after them; the unstable stretches are the ones going down."""
+    f = [1000.0]
+    for k in range(turns + 1):
+        step = 10.0 if k % 2 == 0 else -5.0
+        f += [f[-1] + step * (i + 1) for i in range(4)]
+    f = np.array(f + [f[-1] + 5.0 + 20.0 * i for i in range(5)])
+    P, m = f.size, 3
+    going_down = np.r_[False, np.diff(f) < 0]
+    branch = np.r_[np.zeros(P - 5, int), np.ones(5, int)]
+    sep = np.linspace(0.0, 0.4, P * m).reshape(P, m)
+    return xr.Dataset(
+        {"mesh_frequency_hz": ("point", f),
+         "stable": ("point", np.where(going_down, 0, 1).astype(np.int8)),
+         "branch": ("point", branch),
+         "converged": ("point", np.ones(P, bool)),
+         "rms_force": (("point", "mesh"), 100.0 + 10.0 * np.arange(P)[:, None] * np.ones(m)),
+         "separation": (("point", "mesh"), sep)},
+        coords={"mesh": ["1.sp1", "1.rp1", "2.sp1"], "stage": ("mesh", ["1", "1", "2"]),
+                "side": ("mesh", ["sun", "ring", "sun"]), "planet": ("mesh", [1, 1, 1])},
+        attrs={"reference_stage": "1"})
+
+
+@pytest.mark.parametrize("turns", [0, 3, 25])
+def test_separation_figure_is_one_panel_and_a_colour_bar_however_many_branches(turns):
+    ds = zigzag_sweep(turns)
+    branches = _figures.separation_branches(ds)
+    assert len(branches) == turns + 2  # between the folds, and the restart
+    fig = _figures.separation_figure(ds)
+    panel, bar = fig.axes
+    assert [t.get_text() for t in panel.get_yticklabels()] == ["1.sp1", "1.rp1", "2.sp1"]
+    assert "(kHz)" in panel.get_xlabel() and panel.get_ylabel() == "mesh"
+    assert "share of period" in bar.get_ylabel()
+    assert panel.get_legend() is None  # the legend is the figure's, below the panel
+    if turns:
+        labels = [t.get_text() for t in fig.legends[0].get_texts()]
+        assert any(l.startswith("fold") for l in labels)
+        assert any(l.startswith("row split") for l in labels)  # stable states coexist
+
+
+def test_a_restart_is_not_joined_to_the_branch_before():
+    ds = zigzag_sweep(0)
+    first, second = _figures.separation_branches(ds)
+    assert first.points[-1] + 1 == second.points[0]  # no shared point across a jump
+
+
+def test_separation_map_keeps_stable_states_and_the_smaller_response_on_top():
+    ds = zigzag_sweep(1)  # up 1000-1040, back to 1020 (unstable), a jump, up 1025-1105
+    smap = _figures._separation_map(ds, _figures.separation_branches(ds))
+    centres = 0.5 * (smap.edges_hz[1:] + smap.edges_hz[:-1])
+    inside = (centres > 1026) & (centres < 1039)  # both upward (stable) branches
+    assert np.all(smap.count[inside] == 2) and not np.any(smap.unstable)
+    assert np.all(smap.count[(centres > 1021) & (centres < 1024)] == 1)  # unstable one left
+    # the first branch has the smaller RMS force: its (smaller) separation comes first
+    assert np.all(smap.values[inside, 0, 0] < smap.values[inside, 1, 0])
+
+
+def test_cli_figures_have_labelled_axes_and_the_legend_below(tmp_path, monkeypatch):
+    ds = zigzag_sweep(3)
+    ds["dlf"] = ds["rms_force"]
+    ds["mean_torque"] = ds["rms_force"]
+    kept = {}
+
+    def keep(fig, path, **kw):
+        kept["fig"] = fig
+        fig.canvas.print_figure(path, **kw)
+
+    for what in ("rms", "separation"):
+        out = tmp_path / f"{what}.png"
+        monkeypatch.setattr(matplotlib.figure.Figure, "savefig",
+                            lambda self, path, **kw: keep(self, path, **kw))
+        _save.plot_sweep(ds, str(out), what=what)
+        fig = kept["fig"]
+        panels = [ax for ax in fig.axes if ax.get_visible()]
+        assert all(ax.get_ylabel() for ax in panels)
+        assert all("mesh frequency (kHz)" in ax.get_xlabel() for ax in fig.axes[-2:])
+        assert all(ax.get_legend() is None for ax in panels) and len(fig.legends) == 1
+        labels = [t.get_text() for t in fig.legends[0].get_texts()]
+        assert "stable" in labels and "unstable" in labels
+        assert matplotlib.image.imread(out).shape[0] > 500
