@@ -88,6 +88,12 @@ from ._studies.harmonics import (
     response_cutoff_hz as response_cutoff_hz,
 )
 from ._gear.kinematics import Kinematics as Kinematics, kinematics as kinematics
+from ._gear.frequency_groups import (
+    FrequencyGroup as FrequencyGroup,
+    FrequencyGroups as FrequencyGroups,
+    gear_frequency_groups as gear_frequency_groups,
+    group_frequencies as group_frequencies,
+)
 from ._gear.phasing import (
     phasing_report as phasing_report,
     stiffness_amplitudes as stiffness_amplitudes,

@@ -351,7 +351,9 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--eta", type=int, default=1, help="sub-harmonic index")
     c.add_argument("--max-step", type=float, metavar="HZ",
                    help="largest frequency step of the continuation predictor")
-    c.add_argument("--points", type=int, default=300, help="points of a linear sweep")
+    c.add_argument("--points", type=int, default=300,
+                   help="points of the even grid a linear sweep starts from (refined where "
+                        "the curve bends)")
     c.add_argument("--max-points", type=int, default=3000,
                    help="cap on the points of a continuation")
     c.add_argument("--smoothing", type=float, default=0.0, metavar="REL",
@@ -460,6 +462,7 @@ def _point_flags(c: argparse.ArgumentParser) -> None:
 
 
 def _info(args, train, notes) -> int:
+    from ._gear.frequency_groups import MAX_MULTIPLIER
     from ._gear.kinematics import kinematics
     from ._gear.phasing import phasing_report
     from ._gear.static_loads import static_loads
@@ -505,6 +508,7 @@ def _info(args, train, notes) -> int:
         "torque_balance": loads.balance,
         "phasing": phasing,
         "harmonics": _harmonics_info(train, g.name, kin),
+        **_groups_info(train, kin, args.input_rpm),
         "warnings": notes,
     }
     if args.json:
@@ -532,6 +536,13 @@ def _info(args, train, notes) -> int:
             print(f"\nstage {sid} stiffness phasing (Parker & Lin, k = h Z_s mod N):")
             for r in rows:
                 print(f"  h={r['h']}  k={r['k']}  {r['kind']:<15} sun meshes {r['signs']}")
+    if out["frequency_groups"]:
+        print(f"\nfrequency groups (members multiples <= {MAX_MULTIPLIER} of a group base, "
+              f"at {args.input_rpm:g} rpm):")
+        for k, grp in enumerate(out["frequency_groups"]):
+            print(f"  {k + 1}: base {grp['base_hz']:.2f} Hz: " + ", ".join(
+                f"{m} x{mu}" for m, mu in zip(grp["members"], grp["multipliers"])))
+    print(f"solver: {out['solver_plan']}")
     h = out["harmonics"]
     if h is not None:
         print(f"\nharmonic balance: at least K = {h['floor']} harmonics of the base "
@@ -539,6 +550,39 @@ def _info(args, train, notes) -> int:
               f"(5/3 of the highest mesh mode, {h['mesh_mode_hz']:.0f} Hz); a sweep checks "
               "it against 2K")
     return EXIT_OK
+
+
+def _groups_info(train, kin, input_rpm: float) -> dict:
+    """``frequency_groups`` (``[{members, multipliers, base_exact, base_hz}]``, base in
+    cycles per input revolution and in Hz at ``input_rpm``; empty where nothing turns)
+    and ``solver_plan``: what a sweep of this gear solves."""
+    from ._gear.frequency_groups import gear_frequency_groups
+    from ._gear.kinematics import MAX_MU
+
+    rev_hz = input_rpm / 60.0
+    try:
+        groups = gear_frequency_groups(kin, train.source).groups
+    except TrainError as e:
+        return {"frequency_groups": [], "solver_plan": f"refused: {e}"}
+    rows = [{"members": list(g.members), "multipliers": list(g.multipliers),
+             "base_exact": str(g.base), "base_hz": float(g.base) * rev_hz} for g in groups]
+    if kin.mu is None:
+        plan = "refused: no mesh turns in this gear (nothing to solve at a mesh frequency)"
+    elif len(groups) == 1:
+        plan = (f"periodic harmonic balance with one base, {rows[0]['base_hz']:.2f} Hz, "
+                f"mu = {list(kin.mu)}")
+    elif max(kin.mu + kin.ripple_mu) <= MAX_MU:
+        highest = max((train.stiffness_harmonics * max(kin.mu),) + kin.ripple_mu)
+        plan = (f"{len(groups)} incommensurate groups: the response is quasi-periodic on a "
+                f"{len(groups)}-torus, which the multi-frequency balance (not implemented "
+                f"yet) would solve; a sweep solves the periodic balance of the common base "
+                f"instead, mu = {list(kin.mu)}, where its size allows (the excitation alone "
+                f"reaches harmonic {highest} of that base)")
+    else:
+        plan = (f"refused: {len(groups)} incommensurate groups and no common base with "
+                f"multipliers <= {MAX_MU} (mu = {list(kin.mu)}); the multi-frequency balance "
+                f"that would solve it is not implemented yet")
+    return {"frequency_groups": rows, "solver_plan": plan}
 
 
 def _harmonics_info(train, gear: str, kin) -> dict | None:
@@ -703,6 +747,11 @@ def _sweep_run(args, train, notes, journal) -> int:
           f"{result.seconds:.1f} s")
     print("segments (Hz, harmonics): " + ", ".join(
         f"{a:.0f}-{b:.0f} K={k}" for a, b, k in result.segments))
+    refinement = out["solver"].get("refinement")
+    if refinement:
+        print(f"points placed where the curve needs them: {refinement['added']} added to "
+              f"the even grid, {refinement['checked']} middles checked (straight lines "
+              f"within {100 * refinement['tolerance']:g}% there)")
     if result.folds_hz:
         print("folds at " + ", ".join(f"{f:.1f}" for f in result.folds_hz) + " Hz")
     if out["coexisting_hz"]:

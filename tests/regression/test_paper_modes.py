@@ -9,7 +9,6 @@ planet-mode triples (9.15 and 10.41 kHz) against the closed form
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 import pytest
@@ -25,15 +24,8 @@ def hz(lam):
 
 
 @pytest.fixture(scope="module")
-def paper():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train()
-
-
-@pytest.fixture(scope="module")
-def paper_modes(paper):
-    return gj.modes(gj.assemble(paper, "first"))
+def paper_modes(paper_train):
+    return gj.modes(gj.assemble(paper_train, "first"))
 
 
 def test_paper_first_gear_elastic_modes(paper_modes):
@@ -46,11 +38,11 @@ def test_paper_first_gear_elastic_modes(paper_modes):
     assert len(paper_modes.modes) == 14  # 3 d + sum N
 
 
-def test_paper_triples_are_planet_modes(paper, paper_modes):
+def test_paper_triples_are_planet_modes(paper_train, paper_modes):
     elastic = [m for m in paper_modes.modes if m.cls == "elastic"]
     for stage, khz, sl in (("2", 9.15, slice(2, 5)), ("1", 10.41, slice(5, 8))):
         triple = elastic[sl]
-        s = paper.stage(stage)
+        s = paper_train.stage(stage)
         r_p = float(s.base_radii()[1])
         lam = r_p**2 * float(s.mesh_stiffness.sun + s.mesh_stiffness.ring) / float(s.inertia.planet)
         for m in triple:

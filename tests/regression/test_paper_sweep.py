@@ -10,8 +10,6 @@ only round-off may move them (another BLAS, another XLA version).
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pytest
 
@@ -27,11 +25,8 @@ COEXISTING_HZ = [(2980.5300406457877, 2982.0985115137146),
 
 
 @pytest.fixture(scope="module")
-def backlash_sweep():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        train = gj.load_train()
-    return gj.sweep(train, "first", 3000.0, 5000.0)
+def backlash_sweep(paper_train):
+    return gj.sweep(paper_train, "first", 3000.0, 5000.0)
 
 
 @pytest.mark.slow

@@ -21,6 +21,7 @@ from .context import Context
 from .dataset import point_data, sweep_result_dataset
 from .post import PostStream
 from .progress import with_branches
+from .refine import LINEAR_TOLERANCE
 from .record import SweepLog, run_fields
 from .summary import SweepResult
 
@@ -134,7 +135,10 @@ def sweep(
     walk = _walk.Walk(segments=list(segments))
     post = PostStream(F_static)
     _run_walk(ctx, walk, log, post, linear=linear, points=points,
-              progress=with_branches(progress))
+              progress=with_branches(progress), F_static=F_static)
+    if linear:
+        solver["refinement"] = {"tolerance": LINEAR_TOLERANCE, "checked": walk.checked,
+                                "added": walk.added}
     data = point_data(walk, log, post, ctx, F_static, linear=linear)
     ds = sweep_result_dataset(data, case, F_static=F_static, train_toml=train_toml,
                               solver=solver, folds=walk.folds, stop=walk.stop,
@@ -145,7 +149,8 @@ def sweep(
                        restarts=tuple(walk.restarts))
 
 
-def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress) -> None:
+def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress,
+              F_static) -> None:
     """Walk every segment (a linear grid, or the continuations with the last segment
     speculated); the journal is closed after, and the post-processing stopped where the
     walk is interrupted. BLAS keeps a core for the post-processing while a continuation
@@ -155,7 +160,7 @@ def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress) -> N
     spec = None
     try:
         if linear:
-            _walk.linear_segments(ctx, walk, log, points, progress)
+            _walk.linear_segments(ctx, walk, log, points, progress, F_static)
         while not linear and len(walk.problems) < len(walk.segments):
             entered, spec = _speculation.speculate(ctx, walk, log, post, spec, last)
             if not _walk.walk_segment(ctx, walk, log, post, progress=progress,

@@ -27,6 +27,7 @@ import numpy as np
 from ..._engine import continuation as _continuation
 from ..._engine.results import RESULTS, result_from_word, result_word
 from . import starts as _starts
+from .refine import refine_linear
 
 MAX_DETOUR = 150
 """Points a continuation may go without passing its furthest frequency before the sweep
@@ -75,6 +76,8 @@ class Walk:
     furthest: tuple | None = None
     failed: int = 0
     done: int = 0
+    checked: int = 0
+    added: int = 0
 
     def handover(self, j: int) -> tuple:
         """``(previous, guess)`` for :func:`~gearjax._studies.sweep.starts.enter_segment`
@@ -86,9 +89,12 @@ class Cancelled(Exception):
     """A continuation was called off (a speculation, from its ``cancel`` event)."""
 
 
-def linear_segments(ctx, walk, log, points, progress) -> None:
-    """A linear sweep: each segment's grid of independent points, one batched call and
-    one journal record per segment (``points`` over the whole band)."""
+def linear_segments(ctx, walk, log, points, progress, F_static) -> None:
+    """A linear sweep: each segment's grid of independent points (``points`` evenly over
+    the whole band to start with), refined where straight lines between them would
+    misstate the curve (:func:`~gearjax._studies.sweep.refine.refine_linear`), one
+    journal record per segment; ``walk.checked`` and ``walk.added`` count the middles
+    solved and kept."""
     span = ctx.to_hz - ctx.from_hz
     for j, (f_a, f_b, K) in enumerate(walk.segments):
         problem = ctx.problem(K)
@@ -96,13 +102,17 @@ def linear_segments(ctx, walk, log, points, progress) -> None:
         log.require_K(j, K)
         if log.batch(j) is None:
             n = max(2, round(points * abs(f_b - f_a) / abs(span)))
-            freqs = np.linspace(f_a, f_b, n, endpoint=(f_b == walk.segments[-1][1]))
-            omegas = jnp.asarray([ctx.omega(f) for f in freqs])
-            sols = _starts.solve_points(problem, omegas)
-            log.add({"type": "batch", "segment": j, "K": K,
-                     "omega": np.asarray(omegas, float), "X": np.asarray(sols.X, float),
-                     "result": result_word(sols.result)})
+            last = f_b == walk.segments[-1][1]
+            freqs = np.linspace(f_a, f_b, n, endpoint=last)
+            refined = refine_linear(problem, [ctx.omega(f) for f in freqs], F_static,
+                                    None if last else ctx.omega(f_b),
+                                    max_points=max(ctx.max_points - walk.done, n))
+            log.add({"type": "batch", "segment": j, "K": K, "omega": refined.omega,
+                     "X": np.asarray(refined.X, float), "result": refined.result,
+                     "checked": refined.checked, "added": refined.added})
         batch = log.batch(j)
+        walk.checked += int(batch.get("checked", 0))
+        walk.added += int(batch.get("added", 0))
         walk.done += len(batch["omega"])
         if progress:
             progress(walk.done, float(batch["omega"][-1]) * ctx.mu_ref / (2 * math.pi), 1)
