@@ -36,7 +36,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from . import aft as _aft
-from .mesh_force import fourier_series, mesh_force
+from .mesh_force import mesh_force, stiffness_series, transmission_error
 from .results import RESULTS
 from .static import static_deflection
 from .system import System
@@ -116,12 +116,9 @@ class HBProblem(eqx.Module):
 
 def stiffness_at_phases(system: System, eta: int, tau: Array) -> Array:
     """Dimensionless mesh stiffness ``kappa_m`` ``(m, T)`` at base phases ``tau``
-    ``(T,)`` (rad, ``tau = Omega t / eta``): the shared ``fourier_series``, independent of
+    ``(T,)`` (rad, ``tau = Omega t / eta``): :func:`~gearjax._engine.mesh_force.stiffness_series`, independent of
     ``Omega``."""
-    if system.k_cos.shape[-1] == 0:
-        return jnp.ones((system.n_meshes,) + tau.shape)
-    mu = jnp.asarray(system.mesh_mu) * eta
-    return 1.0 + fourier_series(system.k_cos, system.k_sin, mu, 1.0, tau)
+    return stiffness_series(system.k_cos, system.k_sin, jnp.asarray(system.mesh_mu) * eta, tau)
 
 
 def hb_problem(system: System, settings: HarmonicBalance = HarmonicBalance()) -> HBProblem:
@@ -146,13 +143,7 @@ def hb_problem(system: System, settings: HarmonicBalance = HarmonicBalance()) ->
     tau = _aft.phases(T)
     mu = jnp.asarray(system.mesh_mu) * eta
     kappa = stiffness_at_phases(system, eta, tau)
-    He = system.te_cos.shape[-1]
-    if He:
-        order = jnp.arange(1, He + 1)[None, :] * mu[:, None]
-        te = fourier_series(system.te_cos, system.te_sin, mu, 1.0, tau)
-        te_rate = fourier_series(order * system.te_sin, -order * system.te_cos, mu, 1.0, tau)
-    else:
-        te = te_rate = jnp.zeros((system.n_meshes, T))
+    te, te_rate = transmission_error(system.te_cos, system.te_sin, mu, tau)
     forcing = _aft.place_harmonics(system.f_cos, system.f_sin,
                                    [o * eta for o in system.forcing_mu], K)
     forcing = forcing.at[0].add(system.f_mean)

@@ -83,3 +83,27 @@ def fourier_series(
     return out if t.ndim else out[:, 0]
 
 
+def stiffness_series(k_cos: Float[Array, "m H"], k_sin: Float[Array, "m H"], mu: Array,
+                     tau) -> Array:
+    """Dimensionless mesh stiffness ``kappa = 1 + fourier_series(k_cos, k_sin)`` at base
+    phases ``tau`` (rad, ``(T,)`` or scalar) of meshes turning ``mu`` ``(m,)`` times per
+    base period. **Returns:** ``(m, T)`` (or ``(m,)``); ones where ``H = 0``."""
+    if k_cos.shape[-1] == 0:
+        return jnp.ones(k_cos.shape[:1] + jnp.shape(tau))
+    return 1.0 + fourier_series(k_cos, k_sin, mu, 1.0, tau)
+
+
+def transmission_error(te_cos: Float[Array, "m H"], te_sin: Float[Array, "m H"], mu: Array,
+                       tau) -> tuple[Array, Array]:
+    """Transmission error ``e`` (m) and its phase rate ``de/dtau`` (m/rad) at base phases
+    ``tau`` (rad, ``(T,)`` or scalar) of meshes turning ``mu`` ``(m,)`` times per base
+    period. **Returns:** two ``(m, T)`` (or ``(m,)``) arrays; zeros where ``H = 0``."""
+    H = te_cos.shape[-1]
+    if H == 0:
+        zeros = jnp.zeros(te_cos.shape[:1] + jnp.shape(tau))
+        return zeros, zeros
+    order = jnp.arange(1, H + 1)[None, :] * mu[:, None]
+    return (fourier_series(te_cos, te_sin, mu, 1.0, tau),
+            fourier_series(order * te_sin, -order * te_cos, mu, 1.0, tau))
+
+

@@ -53,7 +53,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from .._config import require_x64
-from .mesh_force import fourier_series, mesh_force
+from .mesh_force import mesh_force, stiffness_series, transmission_error
 from .results import RESULTS
 from .static import static_deflection
 from .system import System
@@ -187,18 +187,8 @@ def _excitation(system: System, tau):
     """Stiffness ``kappa``, transmission error ``e`` (m) and ``de/dtau`` (m/rad), each
     ``(m,)`` or ``(m, T)``, and the forcing ``f`` (``(n,)`` or ``(n, T)``) at phases ``tau``."""
     mu = jnp.asarray(system.mesh_mu)
-    shape = (system.n_meshes,) + jnp.shape(tau)
-    if system.k_cos.shape[-1]:
-        kappa = 1.0 + fourier_series(system.k_cos, system.k_sin, mu, 1.0, tau)
-    else:
-        kappa = jnp.ones(shape)
-    He = system.te_cos.shape[-1]
-    if He:
-        order = jnp.arange(1, He + 1)[None, :] * mu[:, None]
-        te = fourier_series(system.te_cos, system.te_sin, mu, 1.0, tau)
-        te_rate = fourier_series(order * system.te_sin, -order * system.te_cos, mu, 1.0, tau)
-    else:
-        te = te_rate = jnp.zeros(shape)
+    kappa = stiffness_series(system.k_cos, system.k_sin, mu, tau)
+    te, te_rate = transmission_error(system.te_cos, system.te_sin, mu, tau)
     f = system.f_mean if jnp.ndim(tau) == 0 else system.f_mean[:, None] * jnp.ones(jnp.shape(tau))
     if system.forcing_mu:
         arg = jnp.asarray(system.forcing_mu, dtype=float)[:, None] * jnp.atleast_1d(tau)
