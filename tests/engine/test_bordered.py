@@ -7,7 +7,6 @@ import jax
 import jax.numpy as jnp
 import lineax as lx
 import numpy as np
-import pytest
 
 import gearjax as gj
 from gearjax._engine import bordered as _bordered

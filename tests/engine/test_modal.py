@@ -179,10 +179,9 @@ def test_ring_fixed_overall_modes_closed_form(case):
 
 
 @pytest.fixture(scope="module")
-def paper():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train()
+def paper(paper_train):
+    """The bundled paper case (conftest's ``paper_train``)."""
+    return paper_train
 
 
 def _eigvals_of(paper, kin, where, value):

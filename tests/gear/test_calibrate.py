@@ -17,10 +17,9 @@ TRUE_FACTORS = {  # perturbation of the start; the truth is the bundled train
 
 
 @pytest.fixture(scope="module")
-def paper():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train()
+def paper(paper_train):
+    """The bundled paper case (conftest's ``paper_train``)."""
+    return paper_train
 
 
 @pytest.fixture(scope="module")

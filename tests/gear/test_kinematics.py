@@ -112,10 +112,9 @@ def test_planet_speed_matches_both_meshes(teeth, n, gear):
 
 
 @pytest.fixture(scope="module")
-def train():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train()
+def train(paper_train):
+    """The bundled paper case (conftest's ``paper_train``)."""
+    return paper_train
 
 
 def hand_speeds_first():

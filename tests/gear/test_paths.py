@@ -12,10 +12,9 @@ from gearjax._gear.paths import leaf_selector
 
 
 @pytest.fixture(scope="module")
-def paper():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train()
+def paper(paper_train):
+    """The bundled paper case (conftest's ``paper_train``)."""
+    return paper_train
 
 
 def test_values_match_the_file(paper):

@@ -49,10 +49,9 @@ def hand_signs(sun_deg):
 
 
 @pytest.fixture(scope="module")
-def paper():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train()
+def paper(paper_train):
+    """The bundled paper case (conftest's ``paper_train``)."""
+    return paper_train
 
 
 def stage_from_toml(teeth, angles, gamma_sr=0.0, stage_phase=0.0):

@@ -8,7 +8,6 @@ members; every check below allows exactly that leak and no more.
 from __future__ import annotations
 
 import math
-import warnings
 from fractions import Fraction
 
 import pytest
@@ -25,10 +24,9 @@ K_FREE = 1e2
 
 
 @pytest.fixture(scope="module")
-def train():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train()
+def train(paper_train):
+    """The bundled paper case (conftest's ``paper_train``)."""
+    return paper_train
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,6 @@ import json
 import math
 import threading
 import time
-import warnings
 
 import jax.numpy as jnp
 import numpy as np
@@ -26,10 +25,9 @@ from gearjax._engine.results import RESULTS
 
 
 @pytest.fixture(scope="module")
-def train():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train()
+def train(paper_train):
+    """The bundled paper case (conftest's ``paper_train``)."""
+    return paper_train
 
 
 def test_gear_where_no_mesh_turns_is_refused(train):

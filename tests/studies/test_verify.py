@@ -6,7 +6,6 @@ harmonic balance and integrator.
 """
 
 import json
-import warnings
 
 import numpy as np
 import pytest
@@ -17,10 +16,9 @@ from gearjax._cli import main
 
 
 @pytest.fixture(scope="module")
-def train():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train()
+def train(paper_train):
+    """The bundled paper case (conftest's ``paper_train``)."""
+    return paper_train
 
 
 @pytest.fixture(scope="module")
