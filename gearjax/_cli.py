@@ -362,6 +362,14 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--plot", metavar="FIG", help="write the RMS mesh forces")
     c.add_argument("--resume", action="store_true",
                    help="continue an interrupted run from FILE.journal, the journal --out keeps")
+    c.add_argument("--no-complete", dest="complete", action="store_false",
+                   help="follow only the branch the sweep walks (with its restarts); by "
+                        "default a sweep with backlash also traces the branches of the "
+                        "states reached from the band's far end and by the jumps where a "
+                        "stable stretch ends")
+    c.add_argument("--seeds", type=int, default=0, metavar="N",
+                   help="also seed branches from an up and a down time-integration sweep "
+                        "over N even frequencies (default 0: none)")
     c = command("simulate", _simulate_cmd, "steady states by time integration")
     _point_flags(c)
     c.add_argument("--out", metavar="FILE.nc|.csv", help="write the results")
@@ -370,7 +378,8 @@ def _parser() -> argparse.ArgumentParser:
                 "harmonic balance against time integration at the same points")
     _point_flags(c)
     c.add_argument("--harmonics", type=int, metavar="K",
-                   help="harmonic-balance harmonics (default: frequency-dependent)")
+                   help="harmonic-balance harmonics (default: frequency-dependent; on a "
+                        "quasi-periodic gear the order on every torus angle)")
     c.add_argument("--tol-linear", type=float, default=0.01, metavar="REL",
                    help="tolerance on the relative RMS difference without backlash")
     c.add_argument("--tol-nonlinear", type=float, default=0.02, metavar="REL",
@@ -557,7 +566,6 @@ def _groups_info(train, kin, input_rpm: float) -> dict:
     cycles per input revolution and in Hz at ``input_rpm``; empty where nothing turns)
     and ``solver_plan``: what a sweep of this gear solves."""
     from ._gear.frequency_groups import gear_frequency_groups
-    from ._gear.kinematics import MAX_MU
 
     rev_hz = input_rpm / 60.0
     try:
@@ -571,17 +579,23 @@ def _groups_info(train, kin, input_rpm: float) -> dict:
     elif len(groups) == 1:
         plan = (f"periodic harmonic balance with one base, {rows[0]['base_hz']:.2f} Hz, "
                 f"mu = {list(kin.mu)}")
-    elif max(kin.mu + kin.ripple_mu) <= MAX_MU:
-        highest = max((train.stiffness_harmonics * max(kin.mu),) + kin.ripple_mu)
-        plan = (f"{len(groups)} incommensurate groups: the response is quasi-periodic on a "
-                f"{len(groups)}-torus, which the multi-frequency balance (not implemented "
-                f"yet) would solve; a sweep solves the periodic balance of the common base "
-                f"instead, mu = {list(kin.mu)}, where its size allows (the excitation alone "
-                f"reaches harmonic {highest} of that base)")
     else:
-        plan = (f"refused: {len(groups)} incommensurate groups and no common base with "
-                f"multipliers <= {MAX_MU} (mu = {list(kin.mu)}); the multi-frequency balance "
-                f"that would solve it is not implemented yet")
+        from ._engine.floquet import return_turns
+        from ._studies.harmonics import TORUS_TRUNCATION
+
+        G = len(groups)
+        ratios = [g.base / groups[0].base for g in groups]
+        q, d = return_turns([float(r) for r in ratios])
+        common = (f"; a single common base would need mu = {list(kin.mu)}, the excitation "
+                  f"alone reaching harmonic "
+                  f"{max((train.stiffness_harmonics * max(kin.mu),) + kin.ripple_mu)} of it")
+        plan = (f"{G} incommensurate groups: the response is quasi-periodic on a {G}-torus, "
+                f"solved by the multi-frequency harmonic balance (one angle per group, "
+                f"base ratios {', '.join(str(r) for r in ratios)}; {TORUS_TRUNCATION} "
+                f"truncation sets of orders K_g per angle, chosen per segment and checked "
+                f"by doubling each angle's order); stability from the monodromy over {q} "
+                f"turns of the first group's base, after which the torus line returns within "
+                f"{d:.3f} turns" + common)
     return {"frequency_groups": rows, "solver_plan": plan}
 
 
@@ -722,7 +736,8 @@ def _sweep_run(args, train, notes, journal) -> int:
                        max_step_hz=args.max_step, points=args.points,
                        max_points=args.max_points, smoothing=args.smoothing,
                        progress=bar, journal=journal, resume=args.resume,
-                       command=args.command_line)
+                       command=args.command_line, complete=args.complete,
+                       seeds=args.seeds)
     ds = result.dataset
     if args.out:
         save_results(ds, args.out)
@@ -754,15 +769,25 @@ def _sweep_run(args, train, notes, journal) -> int:
               f"within {100 * refinement['tolerance']:g}% there)")
     if result.folds_hz:
         print("folds at " + ", ".join(f"{f:.1f}" for f in result.folds_hz) + " Hz")
+    if len(out["branches"]) > 1:
+        print("branches: " + "; ".join(
+            f"{b['branch']} {b['found']} ({b['seed_hz']:.1f} Hz)" for b in out["branches"]))
     if out["coexisting_hz"]:
         print("coexisting stable states (jumps up and down differ) over " + ", ".join(
             f"{a:.1f}-{b:.1f}" for a, b in out["coexisting_hz"]) + " Hz")
+        for c in out["coexisting"]:
+            print(f"  {c['from_hz']:.1f}-{c['to_hz']:.1f} Hz: {c['states']} stable states; "
+                  "jumps sweeping up at " + (", ".join(f"{f:.1f}" for f in c["jump_up_hz"])
+                                             or "-") + " Hz, sweeping down at "
+                  + (", ".join(f"{f:.1f}" for f in c["jump_down_hz"]) or "-") + " Hz")
     for r in result.restarts:
         print(f"branch left at {r['from_hz']:.1f} Hz ({r['reason']}); new branch from "
               f"{r['at_hz']:.1f} Hz")
     print(f"unstable points: {int(np.sum(stable == 0))}")
     for b in out["bifurcations"]:
         print(f"  stability changes near {b['mesh_frequency_hz']:.1f} Hz: {b['kind']}")
+    for note in out["bifurcation_notes"]:
+        print(f"  {note['note']}")
     for stage in dict.fromkeys(ds["stage"].values.tolist()):
         cols = ds["stage"].values == stage
         peak = np.nanargmax(np.nanmax(rms[:, cols], axis=1))
@@ -808,6 +833,15 @@ def _simulate_cmd(args, train, notes) -> int:
            "warnings": notes}
     for p, periods, steps in zip(out["points"], ds["periods"].values, ds["num_steps"].values):
         p["periods"], p["num_steps"] = int(periods), int(steps)
+    windowed = "windows" in ds  # a quasi-periodic gear: statistics over windows
+    if windowed:
+        for k, p in enumerate(out["points"]):
+            p["windows"] = int(ds["windows"].values[k])
+            p["window_s"] = _finite(ds["window_s"].values[k])
+            p["window_change"] = _finite(ds["window_change"].values[k])
+            p["period_reason"] = ("quasi-periodic: the mesh frequencies fall in "
+                                  "incommensurate groups, so the response never repeats; "
+                                  "statistics of the last of the windows")
     if args.json:
         _emit(out)
         return code
@@ -815,20 +849,32 @@ def _simulate_cmd(args, train, notes) -> int:
     print(f"simulation of gear {g.name!r}: {ds.sizes['point']} points "
           f"({ds.attrs['mode']}), {'linear' if args.linear else 'with backlash'}, "
           f"{ds.attrs['seconds']:.1f} s")
+    if windowed:
+        sv = out["solver"]
+        print(f"quasi-periodic ({sv['torus']['G']} incommensurate frequency groups): "
+              f"statistics over windows of {sv['window_periods']} base periods, "
+              f"consecutive windows agreeing within {sv['tol']:g}")
     stages = list(dict.fromkeys(ds["stage"].values.tolist()))
-    print(f"{'Hz':>9} {'result':>13} {'period':>6} {'periods':>7} "
+    wide = 14 if windowed else 13  # "quasi_periodic"
+    print(f"{'Hz':>9} {'result':>{wide}} {'period':>6} {'periods':>7} "
           + " ".join(f"{'max RMS ' + s + ' (N)':>14}" for s in stages))
     for k, p in enumerate(out["points"]):
         cols = [np.nanmax(rms[k, ds["stage"].values == s]) if p["converged"] or
-                p["result"] == "not_periodic" else math.nan for s in stages]
+                p["result"] in ("not_periodic", "not_stationary") else math.nan
+                for s in stages]
         period = "-" if p["period"] is None else f"{p['period']:.0f}"
-        print(f"{p['mesh_frequency_hz']:>9.1f} {p['result']:>13} {period:>6} "
+        print(f"{p['mesh_frequency_hz']:>9.1f} {p['result']:>{wide}} {period:>6} "
               f"{p['periods']:>7} " + " ".join(f"{c:>14.1f}" for c in cols))
     if args.out:
         print(f"results written to {args.out}")
     if args.plot:
         print(f"figure written to {args.plot}")
     return code
+
+
+def _finite(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
 
 
 def _verify_cmd(args, train, notes) -> int:
@@ -873,7 +919,14 @@ def _verify_cmd(args, train, notes) -> int:
           f"(relative to the stage's largest RMS); {n_ok} of {n} meshes ok; "
           f"harmonic balance {result.seconds['harmonic_balance']:.1f} s, "
           f"integration {result.seconds['integration']:.1f} s")
-    print(f"{'Hz':>9} {'K':>3} {'HB':>10} {'NI':>13} {'stable':>6} {'max rel diff':>12} "
+    ref = out.get("reference")  # a quasi-periodic gear: windowed statistics
+    if ref is not None:
+        print(f"quasi-periodic ({out['torus']['G']} incommensurate frequency groups): torus "
+              f"harmonic balance against {ref['method']}, windows of "
+              f"{ref['window_periods']} base periods, {ref['n_agree']} consecutive windows "
+              f"agreeing within {ref['agreement_tolerance']:g}")
+    kw, nw = (8, 14) if ref is not None else (3, 13)  # "(12, 10)", "quasi_periodic"
+    print(f"{'Hz':>9} {'K':>{kw}} {'HB':>10} {'NI':>{nw}} {'stable':>6} {'max rel diff':>12} "
           f"{'worst mesh':>10} {'RMS HB (N)':>10} {'RMS NI (N)':>10}")
     for k, p in enumerate(out["points"]):
         rel = result.rel_diff[k]
@@ -884,8 +937,12 @@ def _verify_cmd(args, train, notes) -> int:
         else:
             tail = f"{'-':>12} {'-':>10} {'-':>10} {'-':>10}"
         stable = {None: "?", True: "yes", False: "no"}[p["stable"]]
-        print(f"{p['mesh_frequency_hz']:>9.1f} {p['harmonics']:>3} {p['result_hb']:>10} "
-              f"{p['result_ni']:>13} {stable:>6} " + tail + ("" if p["ok"] else "  NOT OK"))
+        K = p["harmonics"]
+        K = K if isinstance(K, int) else "(" + ", ".join(map(str, K)) + ")"
+        flag = "" if p["ok"] else "  NOT OK" + (f" ({p['agreement']})" if "agreement" in p
+                                                else "")
+        print(f"{p['mesh_frequency_hz']:>9.1f} {K:>{kw}} {p['result_hb']:>10} "
+              f"{p['result_ni']:>{nw}} {stable:>6} " + tail + flag)
     if args.out:
         print(f"results written to {args.out}")
     if args.plot:

@@ -6,6 +6,9 @@ package goes through them or through a module's own public names.
 
 from .adjoint import implicit_coefficients as implicit_coefficients
 from .aft import analysis as aft_analysis, synthesis as aft_synthesis
+from .aft import Basis as Basis
+from .aft import TRUNCATIONS as TRUNCATIONS
+from .aft import torus_basis as torus_basis
 from .bordered import Factors as BorderedFactors
 from .bordered import factor as bordered_factor, solve as bordered_solve
 from .results import RESULTS as RESULTS
@@ -26,6 +29,7 @@ from .hb import HarmonicBalance as HarmonicBalance
 from .hb import HBProblem as HBProblem
 from .hb import HBSolution as HBSolution
 from .hb import hb_problem as hb_problem
+from .hb import harmonic_basis as harmonic_basis
 from .hb import jacobian as hb_jacobian
 from .hb import linear_guess as linear_guess
 from .hb import omega_derivative as omega_derivative
@@ -65,3 +69,10 @@ from .time_domain import simulate as simulate
 from .time_domain import simulate_points as simulate_points
 from .time_domain import simulate_sweep as simulate_sweep
 from .time_domain import state_scales as state_scales
+from .time_domain import require_periodic as require_periodic
+from .windowed import Windowed as Windowed
+from .windowed import WindowedResponse as WindowedResponse
+from .windowed import WindowPlan as WindowPlan
+from .windowed import simulate_windowed as simulate_windowed
+from .windowed import simulate_windowed_points as simulate_windowed_points
+from .windowed import window_plan as window_plan

@@ -82,13 +82,13 @@ def factor(problem: _hb.HBProblem, y: Array, omega, g: Array, ty: Array, tlam,
         return dense(_hb.jacobian(problem, y, omega), g, ty, tlam, single)
     s = problem.system
     C, n = problem.shape
-    K = problem.settings.n_harmonics
+    K = problem.basis.n_pairs
     nv = null.shape[1]
     r = n - nv
     w0 = omega / problem.settings.eta
     xs = problem.x_scale
     row_scale = _hb.residual_scale(problem, omega)  # (C, n), per harmonic number
-    harmonic = _aft.harmonic_numbers(K)
+    harmonic = _aft.pair_index(problem.basis)
     scale_k = row_scale[np.concatenate([[0], np.arange(1, C, 2)])]  # (K+1, n): per k
     # unknowns y deflect no mesh where x_scale * y is in the null space; equation rows
     # (divided by the row scale) see no mesh force where orthogonal to (row scale) null
@@ -96,8 +96,8 @@ def factor(problem: _hb.HBProblem, y: Array, omega, g: Array, ty: Array, tlam,
         jnp.concatenate([(null / xs[:, None])[None], scale_k[:, :, None] * null]))
     R, P = bases[0], bases[1:]
 
-    # linear part per harmonic number k, scaled: (K+1, 2, n, 2, n), rows (cos k, sin k)
-    Lk = _hb.harmonic_blocks(s.K, s.M, s.C, w0, np.arange(K + 1))
+    # linear part per pair (the mean first), scaled: (K+1, 2, n, 2, n), rows (cos, sin)
+    Lk = _hb.harmonic_blocks(s.K, s.M, s.C, w0, _aft.frequency_numbers(problem.basis)[::2])
     Lk = Lk / scale_k[:, None, :, None, None] * xs
     Lk = jnp.einsum("kip,kaibj,jq->kapbq", P, Lk, R)
     mean, pairs = Lk[:1, :1, :, :1, :], Lk[1:]

@@ -64,7 +64,9 @@ Oteo & Ros, Phys. Rep. 470 (2009) 151). Why this and not a Runge-Kutta method:
 
 Step rule (:func:`floquet_steps`): ``N`` is the power of two with at least 32 steps
 per period of the highest harmonic of ``tau`` in the solution or the excitation,
-``max(K, highest excitation)``, and at least 256. The stiff modes need no steps (the
+``max(K, highest excitation)``, and at least 256 (on a torus: the multiple of
+:data:`CHUNK` with as many per period of the highest frequency over the ``q`` turns of
+the near return, below). The stiff modes need no steps (the
 exponential is exact for them); the error comes from the time variation and the
 switches. docs/stability.md gives its measured accuracy.
 
@@ -72,9 +74,31 @@ Grazing contacts: a contact (or gap) much shorter than the step is found only as
 well as the interpolant resolves the depth ``|p| - b`` of its turning point, and the
 multipliers depend on that depth like its square root (the contact time), so a very
 shallow graze costs accuracy (docs/stability.md).
+
+**Solutions on a torus** (model.md, "Incommensurate stages"). A quasi-periodic solution
+``x(theta)``, ``theta = (r_1, ..., r_G) omega_0 t``, has no period and no monodromy
+matrix. Its linearisation is ``dz' = A(theta(t)) dz``; where it is reducible,
+``Phi(t) = P(theta(t)) exp(B t) P(theta(0))^-1`` with ``P`` a function on the torus,
+and the characteristic exponents (the eigenvalues of ``B``, the Lyapunov exponents'
+real parts) decide stability. After ``q`` turns of the base angle the line
+``theta(t)`` returns to within the drift ``d_g = q r_g - round(q r_g)`` turns of its
+start (:func:`return_turns`: the fewest ``q <= MAX_RETURN_TURNS`` with every
+``|d_g| <= RETURN_DRIFT``); the monodromy over those ``q`` turns of the *true* line
+(the steps above over ``q 2 pi / omega_0``) is ``P(theta(0) + 2 pi d) exp(B q T_0)
+P(theta(0))^-1``: its eigenvalues are ``exp(s q T_0)`` up to the relative perturbation
+``P^-1 dP/dtheta . 2 pi d``. The verdict takes the ``q``-th root, the growth per turn
+of the base angle (:func:`gearjax._engine.verdict.verdict`). This is the rational
+approximation of the frequency ratio used for quasi-periodic Mathieu equations
+(Zounes & Rand, SIAM J. Appl. Math. 58 (1998) 1094), without replacing the rates: the
+equations integrated are the true ones; only the closure is approximate. ``G = 1`` is
+``q = 1`` with no drift, the periodic monodromy. ``hill`` (Hill's method on the torus
+basis) is the independent cross-check; its dense eigenproblem of ``2 (2P+1) n``
+unknowns is too costly for a sweep.
 """
 
 from __future__ import annotations
+
+import math
 
 import equinox as eqx
 import jax
@@ -83,8 +107,8 @@ import numpy as np
 from jaxtyping import Array, Complex
 
 from . import aft as _aft
-from .hb import HBProblem, highest_excitation, stiffness_at_phases
-from .mesh_force import in_contact
+from .hb import HBProblem
+from .mesh_force import in_contact, stiffness_series
 
 
 _GAUSS = 0.5 / np.sqrt(3.0)
@@ -99,29 +123,58 @@ small enough that a batch of a sweep's chunk of points stays in a core's cache
 # ------------------------------------------------------------------------ helpers
 
 
+RETURN_DRIFT = 0.02
+"""Largest drift (turns of each torus angle) of the near return over which the monodromy
+of a torus solution is taken (module docstring, "Solutions on a torus")."""
+
+MAX_RETURN_TURNS = 256
+"""Most turns of the base angle the near return may take; where none within it meets
+:data:`RETURN_DRIFT`, the turns of the smallest drift are taken (and reported)."""
+
+
+def return_turns(rates, max_turns: int = MAX_RETURN_TURNS, drift: float = RETURN_DRIFT
+                 ) -> tuple[int, float]:
+    """``(q, d)``: the fewest whole turns ``q`` of the base angle after which every angle
+    of ``rates`` (each angle's rate over the base frequency ``omega_0``) is within
+    ``drift`` turns of a whole turn, and the largest such distance ``d``; where no
+    ``q <= max_turns`` does, the ``q`` of the smallest ``d``. ``(1, 0.0)`` for a periodic
+    basis (rates whole numbers)."""
+    r = np.asarray(rates, dtype=float)
+    best = (1, math.inf)
+    for q in range(1, max_turns + 1):
+        d = float(np.max(np.abs(q * r - np.round(q * r))))
+        if d <= max(drift, 1e-12):
+            return q, d
+        if d < best[1] - 1e-12:
+            best = (q, d)
+    return best
+
+
+def top_frequency(problem: HBProblem) -> float:
+    """The highest frequency (over ``omega_0``) in the solution or the excitation: the
+    largest frequency number of the basis, each mesh's top stiffness or transmission-error
+    harmonic, and each forcing rate (``K`` or the highest excitation order for a periodic
+    problem)."""
+    s, eta = problem.system, problem.settings.eta
+    H = max(s.k_cos.shape[-1], s.te_cos.shape[-1])
+    tops = [float(np.max(_aft.frequency_numbers(problem.basis)))]
+    tops += [H * eta * float(r) for r in s.mesh_rates()]
+    tops += [eta * float(r) for r in s.forcing_rates()]
+    return max(tops + [1.0])
+
+
 def floquet_steps(problem: HBProblem, per_harmonic: int = 32) -> int:
-    """Default number of steps per period (static, a power of two): at least
-    ``per_harmonic`` per period of the highest harmonic, and 256; see the module
-    docstring (a sweep takes 16, ``SWEEP_FLOQUET_STEPS`` of the sweep)."""
-    K, eta = problem.settings.n_harmonics, problem.settings.eta
-    top = max(K, highest_excitation(problem.system, eta), 1)
-    need = max(256, per_harmonic * top)
-    return int(2 ** int(np.ceil(np.log2(need))))
-
-
-def _series(C: Array, w0, t: Array):
-    """Value and time derivative of ``C[0] + sum_k C[2k-1] cos(k w0 t) + C[2k] sin(k w0 t)``.
-
-    ``C``: ``(2K+1, m)``; ``t``: ``(..., m)`` (a time per column) -> two ``(..., m)`` arrays.
-    """
-    K = (C.shape[0] - 1) // 2
-    k = jnp.arange(1, K + 1)
-    arg = w0 * t[..., None, :] * k[:, None]  # (..., K, m)
-    c, s = jnp.cos(arg), jnp.sin(arg)
-    a, b = C[1::2], C[2::2]  # (K, m)
-    value = C[0] + jnp.sum(a * c + b * s, axis=-2)
-    rate = w0 * jnp.sum(k[:, None] * (b * c - a * s), axis=-2)
-    return value, rate
+    """Default number of steps over the monodromy's span (static): at least
+    ``per_harmonic`` per period of the highest frequency (:func:`top_frequency`) over the
+    ``q`` turns of :func:`return_turns`, and 256; a power of two for a periodic solution
+    (one period), a multiple of :data:`CHUNK` on a torus (where a power of two could
+    almost double the many turns' steps); see the module docstring (a sweep takes 16,
+    ``SWEEP_FLOQUET_STEPS`` of the sweep)."""
+    q, _ = return_turns(problem.basis.rates)
+    need = max(256, per_harmonic * top_frequency(problem) * q)
+    if q == 1:
+        return int(2 ** int(np.ceil(np.log2(need))))
+    return int(CHUNK * math.ceil(need / CHUNK))
 
 
 def _mesh_series(cos: Array, sin: Array, mu: Array, omega, t: Array):
@@ -141,31 +194,54 @@ def _mesh_series(cos: Array, sin: Array, mu: Array, omega, t: Array):
 
 
 class _Orbit(eqx.Module):
-    """Mesh deflections ``p_m(t)`` of the periodic solution and the stiffness ``kappa_m(t)``."""
+    """Mesh deflections ``p_m(t)`` of the solution along its line ``theta = rates omega_0 t``
+    (one period of a periodic solution, ``turns`` turns of the base angle on a torus)."""
 
-    P: Array  # (2K+1, m) coefficients of W x(tau)
+    P: Array  # (C, m) coefficients of W x(theta)
     w0: Array
     omega: Array
     problem: HBProblem
+    turns: int = eqx.field(static=True, default=1)
 
     def deflection(self, t):
         s = self.problem.system
-        mu = jnp.asarray(s.mesh_mu, dtype=float)
-        p, dp = _series(self.P, self.w0, t)
-        e, de = _mesh_series(s.te_cos, s.te_sin, mu, self.omega, t)
+        rates = jnp.asarray(s.mesh_rates(), dtype=float)
+        p, dp = _line_series(self.P, self.problem.basis, self.w0, t)
+        e, de = _mesh_series(s.te_cos, s.te_sin, rates, self.omega, t)
         return p - e, dp - de
 
     def on_grid(self, n: int):
-        """Deflection and rate ``(n, m)`` at the ``n`` equally spaced instants ``t_j = j T / n``
-        of the period: inverse FFTs of the coefficients (exact for ``n > 2K``), and the
-        transmission error evaluated in phase (it does not depend on ``Omega``)."""
-        s = self.problem.system
+        """Deflection and rate ``(n, m)`` at the ``n`` equally spaced instants ``t_j = j S /
+        n`` of the span ``S = turns 2 pi / omega_0``: for a periodic solution inverse FFTs
+        of the coefficients (exact for ``n > 2K``), on a torus the series summed along the
+        line; the transmission error evaluated in phase (it does not depend on ``Omega``)."""
+        s, basis = self.problem.system, self.problem.basis
         eta = self.problem.settings.eta
-        p = _aft.synthesis(self.P, n)
-        dp = self.w0 * _aft.synthesis(_aft.derivative(self.P), n)
-        mu = jnp.asarray(s.mesh_mu, dtype=float) * eta
-        e, de = _mesh_series(s.te_cos, s.te_sin, mu, 1.0, _aft.phases(n)[:, None])
+        if basis.G == 1 and self.turns == 1:
+            p = _aft.synthesis(self.P, n)
+            dp = self.w0 * _aft.synthesis(_aft.derivative(self.P), n)
+        else:
+            tau = jnp.asarray(2 * np.pi * self.turns * np.arange(n) / n)
+            p, dp = _line_series(self.P, basis, 1.0, tau[:, None])
+            dp = self.w0 * dp
+        rates = jnp.asarray(s.mesh_rates(), dtype=float) * eta
+        tau = jnp.asarray(2 * np.pi * self.turns * np.arange(n) / n)
+        e, de = _mesh_series(s.te_cos, s.te_sin, rates, 1.0, tau[:, None])
         return p - e, dp - self.w0 * de
+
+
+def _line_series(C: Array, basis, w0, t: Array):
+    """Value and time derivative of the function with coefficients ``C`` ``(2P+1, m)`` on
+    ``basis`` along the line ``theta = rates w0 t``: ``C[0] + sum_j C[2j-1] cos(nu_j w0 t)
+    + C[2j] sin(nu_j w0 t)``, ``nu_j`` the frequency numbers (the harmonics ``1..K`` of a
+    periodic basis). ``t``: ``(..., m)`` or ``(..., 1)`` -> two ``(..., m)`` arrays."""
+    nu = jnp.asarray(_aft.frequency_numbers(basis)[1::2])
+    arg = w0 * t[..., None, :] * nu[:, None]  # (..., P, m)
+    c, s = jnp.cos(arg), jnp.sin(arg)
+    a, b = C[1::2], C[2::2]
+    value = C[0] + jnp.sum(a * c + b * s, axis=-2)
+    rate = w0 * jnp.sum(nu[:, None] * (b * c - a * s), axis=-2)
+    return value, rate
 
 
 def _contact_intervals(p0, p1, dp0, dp1, h, b):
@@ -388,28 +464,37 @@ def _tree_product(E):
 
 
 def monodromy_scaled(problem: HBProblem, X, omega, n_steps: int | None, frame=None):
-    """Monodromy in the scaled coordinates ``(q, u)``, with the frame and the orbit.
-    ``frame``: from :func:`_frame` (built here when ``None``); given, the computation
-    calls no LAPACK routine (see :func:`verdict_basis`)."""
+    """Monodromy in the scaled coordinates ``(q, u)``, with the frame and the orbit: over one
+    period of a periodic solution, over the ``q`` turns of the base angle of
+    :func:`return_turns` on a torus (module docstring). ``frame``: from
+    :func:`scaled_frame` (built here when ``None``); given, the computation calls no LAPACK
+    routine (see :func:`gearjax._engine.verdict.verdict_basis`)."""
     n_steps = floquet_steps(problem) if n_steps is None else n_steps
-    if n_steps < 2 or n_steps & (n_steps - 1):
-        raise ValueError(
-            f"n_steps must be a power of two >= 2 (steps per period), not {n_steps!r}")
+    if n_steps < 2 or (n_steps & (n_steps - 1) and n_steps % CHUNK):
+        raise ValueError(f"n_steps must be a power of two >= 2 or a multiple of {CHUNK} "
+                         f"(steps over the span), not {n_steps!r}")
     s = problem.system
+    turns, _ = return_turns(problem.basis.rates)
     omega = jnp.asarray(omega, dtype=float)
-    w0 = omega / problem.settings.eta
-    period = 2 * jnp.pi / w0
-    h = period / n_steps
+    eta = problem.settings.eta
+    w0 = omega / eta
+    h = turns * 2 * jnp.pi / w0 / n_steps
     frame = scaled_frame(problem) if frame is None else frame
-    orbit = _Orbit(P=X @ s.W.T, w0=w0, omega=omega, problem=problem)
+    orbit = _Orbit(P=X @ s.W.T, w0=w0, omega=omega, problem=problem, turns=turns)
     chunk = min(CHUNK, n_steps)
     p, dp = orbit.on_grid(n_steps)  # (N, m) at the step starts
     by_chunk = lambda a: a.reshape(n_steps // chunk, chunk, -1)  # noqa: E731
+    # the line closes (periodic) or nearly so (torus): the last step ends on the first
+    # sample, as in the periodic case; on a torus the true end lies within the drift
     ends = tuple(by_chunk(a) for a in (p, jnp.roll(p, -1, axis=0), dp, jnp.roll(dp, -1, axis=0)))
+    if turns > 1 or problem.basis.G > 1:
+        p_end, dp_end = orbit.deflection(jnp.full((s.n_meshes,), turns * 2 * jnp.pi / w0))
+        ends = (ends[0], ends[1].at[-1, -1].set(p_end), ends[2], ends[3].at[-1, -1].set(dp_end))
     # the stiffness at the two Gauss points of every step, in phase: the same for every
     # Omega, so under vmap over the points of a sweep it is evaluated once
-    step = 2 * np.pi / n_steps
-    kappa = tuple(by_chunk(stiffness_at_phases(s, problem.settings.eta, jnp.asarray(
+    step = 2 * np.pi * turns / n_steps
+    rates = jnp.asarray(s.mesh_rates(), dtype=float) * eta
+    kappa = tuple(by_chunk(stiffness_series(s.k_cos, s.k_sin, rates, jnp.asarray(
         step * (np.arange(n_steps) + 0.5 + x))).T) for x in (-_GAUSS, _GAUSS))
 
     def body(Phi, inputs):

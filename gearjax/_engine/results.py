@@ -23,6 +23,11 @@ class RESULTS(optx.RESULTS):  # type: ignore[misc]
 
     not_periodic = ("The time integration ran its periods without settling onto a "
                     "periodic orbit.")
+    quasi_periodic = ("The windowed time integration reached statistics that agree between "
+                      "consecutive windows (for a quasi-periodic train, which has no period, "
+                      "these statistics are its result).")
+    not_stationary = ("The time integration ran its windows without consecutive windows' "
+                      "statistics agreeing within tolerance.")
     solver_failed = "The ODE solver failed (its step size collapsed)."
     reached_end = "The continuation reached the end of its parameter range."
     max_points = "The continuation used its budget of points."
@@ -44,7 +49,7 @@ _WORDS = {"successful": "converged", "nonlinear_max_steps_reached": "max_steps",
 
 _NAMES = ("successful", "max_steps_reached", "singular", "breakdown", "stagnation", "conlim",
           "nonfinite_input", "nonlinear_max_steps_reached", "nonlinear_divergence",
-          "nonfinite", "not_periodic", "solver_failed", "reached_end", "max_points",
+          "nonfinite", "not_periodic", "quasi_periodic", "not_stationary", "solver_failed", "reached_end", "max_points",
           "step_too_small", "closed_loop", "detour", "runaway", "no_converged_start",
           "fold", "unstable", "not_converged")
 """Every item's name (an equinox enumeration lists none)."""

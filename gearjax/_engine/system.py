@@ -3,10 +3,13 @@
     M x'' + C x' + K x + sum_m w_m F_m = f(t),
     p_m = w_m . x - e_m(t),   F_m = kbar_m kappa_m(t) g(p_m) + c_m p_m'
 
-with every excitation periodic in one base frequency Omega: mesh ``m`` varies at
-``mu_m Omega`` (its stiffness and transmission error harmonics ``h mu_m Omega``),
-forcing column ``l`` at ``forcing_mu_l Omega``. Solvers see only this module:
-nothing here knows about suns or rings except the labels.
+with every excitation quasi-periodic in ``G`` torus angles (model.md, "Incommensurate
+stages"): angle ``g`` turns at ``angle_ratio[g] Omega``; mesh ``m`` varies at
+``mu_m`` times the rate of its angle ``mesh_angle[m]`` (its stiffness and
+transmission error harmonics ``h mu_m``), forcing column ``l`` at ``forcing_mu_l``
+times the rate of angle ``forcing_angle[l]``. ``G = 1`` with ratio 1 is the periodic
+case: everything varies at integer multiples of the one base frequency ``Omega``.
+Solvers see only this module: nothing here knows about suns or rings except the labels.
 """
 
 from __future__ import annotations
@@ -39,7 +42,11 @@ class System(eqx.Module):
     - ``mesh_radius`` ``(m,)``: lever arm (m) turning a mesh force into a torque;
     - ``f_mean`` ``(n,)``, ``f_cos``, ``f_sin`` ``(n, L)``: forcing (N m), column ``l``
       at ``forcing_mu[l] Omega``;
-    - static: ``mesh_mu``, ``forcing_mu``, ``contact_damping`` and labels.
+    - static: ``mesh_mu``, ``forcing_mu`` (integer multipliers of the rate of their
+      torus angle), ``mesh_angle`` ``(m,)`` and ``forcing_angle`` ``(L,)`` (the torus
+      angle of each mesh and forcing column; empty: all angle 0), ``angle_ratio``
+      ``(G,)`` (each angle's rate over ``Omega``; ``(1.0,)``: periodic in ``Omega``),
+      ``contact_damping`` and labels.
     """
 
     M: Float[Array, "n n"]
@@ -69,6 +76,9 @@ class System(eqx.Module):
     mesh_group: tuple[str, ...] = eqx.field(static=True, default=())
     mesh_side: tuple[str, ...] = eqx.field(static=True, default=())
     mesh_planet: tuple[int, ...] = eqx.field(static=True, default=())
+    mesh_angle: tuple[int, ...] = eqx.field(static=True, default=())
+    forcing_angle: tuple[int, ...] = eqx.field(static=True, default=())
+    angle_ratio: tuple[float, ...] = eqx.field(static=True, default=(1.0,))
 
     @property
     def n_dof(self) -> int:
@@ -77,6 +87,32 @@ class System(eqx.Module):
     @property
     def n_meshes(self) -> int:
         return self.W.shape[-2]
+
+    @property
+    def n_angles(self) -> int:
+        """``G``: torus angles of the excitation (1: periodic in ``Omega``)."""
+        return len(self.angle_ratio)
+
+    @property
+    def mesh_angles(self) -> tuple[int, ...]:
+        """The torus angle of each mesh, ``(m,)``."""
+        return self.mesh_angle or (0,) * len(self.mesh_mu)
+
+    @property
+    def forcing_angles(self) -> tuple[int, ...]:
+        """The torus angle of each forcing column, ``(L,)``."""
+        return self.forcing_angle or (0,) * len(self.forcing_mu)
+
+    def mesh_rates(self) -> np.ndarray:
+        """Each mesh's fundamental frequency over ``Omega``, ``(m,)`` (floats):
+        ``mu_m angle_ratio[mesh_angle[m]]``."""
+        ratio = np.asarray(self.angle_ratio, float)
+        return np.asarray(self.mesh_mu, float) * ratio[list(self.mesh_angles)]
+
+    def forcing_rates(self) -> np.ndarray:
+        """Each forcing column's frequency over ``Omega``, ``(L,)`` (floats)."""
+        ratio = np.asarray(self.angle_ratio, float)
+        return np.asarray(self.forcing_mu, float) * ratio[list(self.forcing_angles)]
 
     @property
     def K(self) -> Float[Array, "n n"]:
@@ -111,6 +147,9 @@ def system_from_matrices(
     f_cos=None,
     f_sin=None,
     forcing_mu: Sequence[int] = (),
+    mesh_angle: Sequence[int] = (),
+    forcing_angle: Sequence[int] = (),
+    angle_ratio: Sequence[float] = (1.0,),
     contact_damping: bool = False,
     dof_labels: Sequence[str] | None = None,
     mesh_labels: Sequence[str] | None = None,
@@ -119,7 +158,9 @@ def system_from_matrices(
 
     ``K`` (``(n, n)``, symmetric) becomes one spring per eigen-direction with class
     ``elastic``. Missing mesh arrays default to constant stiffness, no backlash, no
-    damping and no transmission error; ``mesh_mu`` defaults to 1 per mesh.
+    damping and no transmission error; ``mesh_mu`` defaults to 1 per mesh. Torus
+    angles (``mesh_angle``, ``forcing_angle``, ``angle_ratio``, see :class:`System`)
+    default to one angle turning at ``Omega``: a periodic system.
 
     Example, the clearance oscillator ``x'' + 0.1 x' + g(x) = 0.1 + 0.03 cos(Omega t)``
     with unit stiffness and half clearance 1::
@@ -170,4 +211,7 @@ def system_from_matrices(
         mesh_group=("",) * m,
         mesh_side=("",) * m,
         mesh_planet=(0,) * m,
+        mesh_angle=tuple(int(g) for g in mesh_angle),
+        forcing_angle=tuple(int(g) for g in forcing_angle),
+        angle_ratio=tuple(float(r) for r in angle_ratio),
     )

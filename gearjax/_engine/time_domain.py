@@ -8,8 +8,10 @@ The equations are exactly those of the harmonic balance (``_hb``):
 with the stiffness ``kappa`` the truncated Fourier series of the system
 (``fourier_series`` of ``k_cos``, ``k_sin``: the ``H`` stiffness harmonics, not a
 true rectangular wave), the transmission error ``e`` the series of ``te_cos``,
-``te_sin`` and the forcing ``f_mean`` plus the ``f_cos``, ``f_sin`` columns at
-``forcing_mu Omega``. The mesh force comes from the one shared ``mesh_force``.
+``te_sin`` and the forcing ``f_mean`` plus the ``f_cos``, ``f_sin`` columns, each
+series at its true rate (``System.mesh_rates``, ``System.forcing_rates`` times
+``Omega``: whole multiples for a periodic system, incommensurate floats for one with
+several torus angles). The mesh force comes from the one shared ``mesh_force``.
 
 Integration variables are scaled: the phase ``tau = Omega t`` (one base period is
 ``2 pi``) and ``y = x / x_scale`` with the harmonic balance's ``x_scale`` (the
@@ -39,7 +41,9 @@ dozens of switches per period). Convergence is checked by halving the tolerances
 Steady state: integrate one base period ``2 pi / Omega`` at a time and compare
 the Poincare points (mesh deflections ``W x`` and rates ``W x'``, not the full
 state: the undamped near-rigid-body mode never settles but carries no mesh force)
-with those 1..8 periods earlier.
+with those 1..8 periods earlier. Only a periodic excitation has such a period: the
+steady-state search refuses a quasi-periodic ``System`` (``ValueError``,
+:func:`require_periodic`), whose time integration is windowed (``windowed.py``).
 """
 
 from __future__ import annotations
@@ -183,21 +187,51 @@ def state_scales(system: System):
     return length, length / jnp.where(lever > 0, lever, 1.0)
 
 
-def _excitation(system: System, tau):
-    """Stiffness ``kappa``, transmission error ``e`` (m) and ``de/dtau`` (m/rad), each
-    ``(m,)`` or ``(m, T)``, and the forcing ``f`` (``(n,)`` or ``(n, T)``) at phases ``tau``."""
-    mu = jnp.asarray(system.mesh_mu)
-    kappa = stiffness_series(system.k_cos, system.k_sin, mu, tau)
-    te, te_rate = transmission_error(system.te_cos, system.te_sin, mu, tau)
+def excitation(system: System, tau):
+    """The excitation at base phases ``tau = Omega t`` (rad, scalar or ``(T,)``).
+
+    Every series turns at its true rate: mesh ``m`` at ``system.mesh_rates()[m]`` and
+    forcing column ``l`` at ``system.forcing_rates()[l]`` times ``Omega`` (floats, so a
+    quasi-periodic ``System`` with ``G > 1`` torus angles gets its incommensurate
+    excitation; integers when periodic). **Returns:** stiffness ``kappa``, transmission
+    error ``e`` (m) and ``de/dtau`` (m/rad), each ``(m,)`` or ``(m, T)``, and the forcing
+    ``f`` (N m or N), ``(n,)`` or ``(n, T)``."""
+    rate = jnp.asarray(system.mesh_rates(), dtype=float)
+    kappa = stiffness_series(system.k_cos, system.k_sin, rate, tau)
+    te, te_rate = transmission_error(system.te_cos, system.te_sin, rate, tau)
     f = system.f_mean if jnp.ndim(tau) == 0 else system.f_mean[:, None] * jnp.ones(jnp.shape(tau))
     if system.forcing_mu:
-        arg = jnp.asarray(system.forcing_mu, dtype=float)[:, None] * jnp.atleast_1d(tau)
+        arg = jnp.asarray(system.forcing_rates(), dtype=float)[:, None] * jnp.atleast_1d(tau)
         harm = system.f_cos @ jnp.cos(arg) + system.f_sin @ jnp.sin(arg)
         f = f + (harm if jnp.ndim(tau) else harm[:, 0])
     return kappa, te, te_rate, f
 
 
-class _Problem(eqx.Module):
+def excitation_rates(system: System) -> tuple[float, ...]:
+    """The fundamental rate over ``Omega`` of every mesh and forcing column (floats)."""
+    return tuple(float(r) for r in system.mesh_rates()) + tuple(
+        float(r) for r in system.forcing_rates())
+
+
+def require_periodic(system: System, caller: str) -> None:
+    """Refuse a ``System`` whose excitation is not periodic in ``2 pi / Omega``.
+
+    **Raises:** ``ValueError`` naming the angle ratios when the system has more than one
+    torus angle or an excitation rate that is not a whole multiple of ``Omega``: such a
+    train has no period, so no periodic steady state to search for."""
+    rates = excitation_rates(system)
+    whole = all(abs(r - round(r)) <= 1e-12 * max(1.0, abs(r)) for r in rates)
+    if system.n_angles > 1 or not whole:
+        raise ValueError(
+            f"{caller}: system.angle_ratio = {tuple(system.angle_ratio)} gives excitation "
+            f"rates {tuple(round(r, 12) for r in rates)} (times Omega), not all whole "
+            f"multiples of one base frequency: the train is quasi-periodic and has no "
+            f"period, so there is no periodic steady state to search for. Integrate it in "
+            f"windows instead (simulate_windowed), which reports the statistics of the "
+            f"response once consecutive windows agree.")
+
+
+class IntegrationProblem(eqx.Module):
     """A ``System`` prepared for integration in ``tau = Omega t`` and ``y = x / x_scale``."""
 
     system: System
@@ -205,29 +239,48 @@ class _Problem(eqx.Module):
     K: Array  # (n, n)
     x_scale: Array  # (n,)
     length: Array  # ()
-    rate_scale: Array  # (): mesh rate scale, length * max multiplier
+    rate_scale: Array  # (): mesh rate scale, length * the fastest fundamental rate
 
 
-def _problem(system: System) -> _Problem:
+def integration_problem(system: System) -> IntegrationProblem:
+    """``system`` prepared for :func:`vector_field`: inverse mass, stiffness, scales."""
     length, x_scale = state_scales(system)
-    top = max(tuple(system.mesh_mu) + tuple(system.forcing_mu) + (1,))
-    return _Problem(system=system, Minv=jnp.linalg.inv(system.M), K=system.K, x_scale=x_scale,
-                    length=length, rate_scale=length * top)
+    top = max(excitation_rates(system) + (1,))
+    return IntegrationProblem(system=system, Minv=jnp.linalg.inv(system.M), K=system.K,
+                              x_scale=x_scale, length=length, rate_scale=length * top)
 
 
-def _vector_field(tau, z, args):
+def vector_field(tau, z, args):
+    """``d(y, dy/dtau)/dtau`` of the scaled state ``z`` ``(2n,)`` at phase ``tau`` (rad);
+    ``args = (problem, omega)``, ``omega`` the base frequency (rad/s)."""
     problem, omega = args
     s = problem.system
     n = s.n_dof
     y, u = z[:n], z[n:]
     x = problem.x_scale * y
     v = omega * problem.x_scale * u
-    kappa, te, te_rate, f = _excitation(s, tau)
+    kappa, te, te_rate, f = excitation(s, tau)
     p = s.W @ x - te
     p_dot = s.W @ v - omega * te_rate
     F = mesh_force(p, p_dot, kappa, s.kbar, s.backlash, s.damping, s.contact_damping)
     acc = problem.Minv @ (f - s.C @ v - problem.K @ x - s.W.T @ F)
     return jnp.concatenate([u, acc / (omega**2 * problem.x_scale)])
+
+
+def mesh_samples(problem: IntegrationProblem, omega, tau, z):
+    """Coordinates and mesh quantities of scaled states ``z`` ``(2n, T)`` at phases
+    ``tau`` ``(T,)`` (rad): ``(x, v, p, p_dot, F)``, ``(n, T)`` coordinates (rad or m) and
+    rates (per s), ``(m, T)`` mesh deflections (m), rates (m/s) and forces (N, from the
+    one shared ``mesh_force``)."""
+    s, n = problem.system, problem.system.n_dof
+    x = problem.x_scale[:, None] * z[:n]
+    v = omega * problem.x_scale[:, None] * z[n:]
+    kappa, te, te_rate, _ = excitation(s, tau)
+    p = s.W @ x - te
+    p_dot = s.W @ v - omega * te_rate
+    F = mesh_force(p, p_dot, kappa, s.kbar[:, None], s.backlash[:, None], s.damping[:, None],
+                   s.contact_damping)
+    return x, v, p, p_dot, F
 
 
 # -------------------------------------------------------------------- initial states
@@ -265,7 +318,7 @@ def hb_initial_state(X: Float[Array, "C n"], omega, eta: int = 1):
 # ---------------------------------------------------------------------- steady state
 
 
-def _poincare(problem: _Problem, z):
+def _poincare(problem: IntegrationProblem, z):
     """Scaled mesh deflections and rates (the full state for a system without meshes)."""
     s, n = problem.system, problem.system.n_dof
     if not s.n_meshes:
@@ -275,14 +328,14 @@ def _poincare(problem: _Problem, z):
     return jnp.concatenate([p, r])
 
 
-def _steady_state(problem: _Problem, omega, x0, v0, settings: TimeDomain) -> Trajectory:
+def _steady_state(problem: IntegrationProblem, omega, x0, v0, settings: TimeDomain) -> Trajectory:
     require_x64()
     s = problem.system
     n, N, P, Q = s.n_dof, settings.n_samples, settings.sample_periods, settings.max_subharmonic
     omega = eqx.error_if(jnp.asarray(omega, dtype=float), ~(omega > 0),
                          "simulate: the base frequency omega must be positive (rad/s)")
     z0 = jnp.concatenate([x0 / problem.x_scale, v0 / (omega * problem.x_scale)])
-    term = dfx.ODETerm(_vector_field)
+    term = dfx.ODETerm(vector_field)
     controller = dfx.PIDController(rtol=settings.rtol, atol=settings.atol,
                                    pcoeff=settings.pcoeff, icoeff=settings.icoeff)
     # the last sample exactly at the period's end (2 pi j / N rounds above 2 pi for some N)
@@ -359,14 +412,7 @@ def _steady_state(problem: _Problem, omega, x0, v0, settings: TimeDomain) -> Tra
     state = jax.lax.while_loop(cond, body, init)
     k = state["k"]
     tau = 2 * jnp.pi * (k - P) + 2 * jnp.pi * jnp.arange(P * N) / N
-    z = state["samples"].T  # (2n, T)
-    x = problem.x_scale[:, None] * z[:n]
-    v = omega * problem.x_scale[:, None] * z[n:]
-    kappa, te, te_rate, _ = _excitation(s, tau)
-    p = s.W @ x - te
-    p_dot = s.W @ v - omega * te_rate
-    F = mesh_force(p, p_dot, kappa, s.kbar[:, None], s.backlash[:, None], s.damping[:, None],
-                   s.contact_damping)
+    x, v, p, p_dot, F = mesh_samples(problem, omega, tau, state["samples"].T)
     z_end = state["z"]
     return Trajectory(omega=omega, t=tau / omega, x=x, v=v, p=p, p_dot=p_dot, F=F,
                       x_end=problem.x_scale * z_end[:n],
@@ -379,7 +425,7 @@ def _steady_state(problem: _Problem, omega, x0, v0, settings: TimeDomain) -> Tra
 # ------------------------------------------------------------------------ public API
 
 
-def _start(system: System, x0, v0):
+def start_state(system: System, x0, v0):
     if x0 is None:
         x0, zero = contact_state(system)
         return x0, zero if v0 is None else jnp.asarray(v0, dtype=float)
@@ -404,7 +450,10 @@ def simulate(system: System, omega, *, x0=None, v0=None,
     **Arguments:** ``system``: the :class:`System`; ``omega``: base frequency Omega
     (rad/s, scalar); ``x0``, ``v0``: ``(n,)`` initial coordinates (rad or m) and
     rates (per s); ``settings``: :class:`TimeDomain`. **Returns:** a :class:`Trajectory`.
+
+    **Raises:** ``ValueError`` for a quasi-periodic ``system`` (:func:`require_periodic`).
     """
+    require_periodic(system, "simulate")
     return _simulate(system, *_arrays(omega, x0, v0), settings)
 
 
@@ -415,8 +464,8 @@ def _arrays(*values):
 
 @eqx.filter_jit
 def _simulate(system, omega, x0, v0, settings):
-    x0, v0 = _start(system, x0, v0)
-    return _steady_state(_problem(system), omega, x0, v0, settings)
+    x0, v0 = start_state(system, x0, v0)
+    return _steady_state(integration_problem(system), omega, x0, v0, settings)
 
 
 def simulate_points(system: System, omegas, *, x0=None, v0=None,
@@ -431,8 +480,10 @@ def simulate_points(system: System, omegas, *, x0=None, v0=None,
     that many vmapped points. A vmapped batch advances in lock-step (every point takes
     as many steps and periods as the slowest), which on a CPU usually costs more than it
     saves (docs/time_domain.md). **Returns:** a :class:`Trajectory` with a leading axis ``B``
-    on every field.
+    on every field. **Raises:** ``ValueError`` for a quasi-periodic ``system``
+    (:func:`require_periodic`).
     """
+    require_periodic(system, "simulate_points")
     return _simulate_points(system, *_arrays(omegas, x0, v0), settings, batch_size)
 
 
@@ -446,14 +497,15 @@ def compile_simulate_points(system: System, omegas, *, x0=None, v0=None,
 
     **Returns:** the compiled program (``jax.stages.Compiled``).
     """
+    require_periodic(system, "compile_simulate_points")
     return _simulate_points.lower(system, *_arrays(omegas, x0, v0), settings,
                                   batch_size).compile()
 
 
 @eqx.filter_jit
 def _simulate_points(system, omegas, x0, v0, settings, batch_size):
-    x0, v0 = _start(system, x0, v0)
-    problem = _problem(system)
+    x0, v0 = start_state(system, x0, v0)
+    problem = integration_problem(system)
     x0 = jnp.broadcast_to(x0, omegas.shape + x0.shape[-1:])
     v0 = jnp.broadcast_to(v0, omegas.shape + v0.shape[-1:])
 
@@ -478,15 +530,17 @@ def simulate_sweep(system: System, omegas, *, x0=None, v0=None,
     **Arguments:** ``x0``, ``v0``: start of the first point, ``(n,)`` shared or
     ``(..., n)`` with all the leading axes of ``omegas``; None for the static contact
     state.
-    **Returns:** a :class:`Trajectory` with leading axes ``(..., N)``.
+    **Returns:** a :class:`Trajectory` with leading axes ``(..., N)``. **Raises:**
+    ``ValueError`` for a quasi-periodic ``system`` (:func:`require_periodic`).
     """
+    require_periodic(system, "simulate_sweep")
     return _simulate_sweep(system, *_arrays(omegas, x0, v0), settings)
 
 
 @eqx.filter_jit
 def _simulate_sweep(system, omegas, x0, v0, settings):
-    x0, v0 = _start(system, x0, v0)
-    problem = _problem(system)
+    x0, v0 = start_state(system, x0, v0)
+    problem = integration_problem(system)
 
     def sweep(ws, a, b):
         def step(carry, w):

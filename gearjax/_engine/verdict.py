@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Complex, Float
 
-from .floquet import ScaledFrame, floquet_steps, monodromy_scaled, scaled_frame
+from .floquet import ScaledFrame, floquet_steps, monodromy_scaled, return_turns, scaled_frame
 from .hb import HBProblem
 from .modal import mode_classes
 
@@ -27,7 +27,10 @@ class Stability(eqx.Module):
     **Fields:**
 
     - ``multipliers`` ``(2n,)`` complex: Floquet multipliers (eigenvalues of the
-      monodromy matrix over one response period);
+      monodromy matrix over one response period); for a solution on a torus, the
+      principal ``q``-th roots of those of the monodromy over the ``q`` turns of the base
+      angle of its near return (:func:`gearjax._engine.floquet.return_turns`): their
+      moduli are the growth per turn, their phases are not those of a period;
     - ``mesh_strain`` ``(2n,)``: how much each Floquet mode deflects the meshes,
       ``max_m |w_m . dz| / max_i (lever_i |dz_i|)``, ``lever_i = max_m |W_mi|`` (the
       mesh deflection a unit motion of coordinate ``i`` can cause; 0: no mesh strained);
@@ -44,7 +47,7 @@ class Stability(eqx.Module):
       multiplier +1. The verdict is on the gear's vibration: the other ``2 (n - r)``
       multipliers;
     - ``max_abs``: the largest ``|mu|`` of the multipliers that are not excluded;
-    - ``stable`` bool: ``max_abs < 1 + tol``.
+    - ``stable`` bool: ``max_abs < 1 + tol`` (per turn of the base angle on a torus).
     """
 
     multipliers: Complex[Array, " 2n"]
@@ -117,6 +120,9 @@ def verdict(problem: HBProblem, basis: VerdictBasis, mu, V, tol=1e-6) -> Stabili
         total > 0, total, 1.0)
     rank = jnp.argsort(jnp.argsort(-share))  # 0 for the most rigid-body-like Floquet mode
     excluded = rank < 2 * jnp.sum(basis.rigid)
+    turns, _ = return_turns(problem.basis.rates)
+    if turns > 1:  # a torus: the growth per turn of the base angle (floquet.py)
+        mu = jnp.abs(mu) ** (1.0 / turns) * jnp.exp(1j * jnp.angle(mu) / turns)
     max_abs = jnp.max(jnp.where(excluded, 0.0, jnp.abs(mu)))
     return Stability(multipliers=mu, mesh_strain=ratio, rigid_share=share, excluded=excluded,
                      max_abs=max_abs, stable=max_abs < 1.0 + tol)

@@ -17,14 +17,22 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._config import require_x64
+from .frequency_groups import TorusLayout
 from .kinematics import Kinematics, kinematics
 from .phasing import harmonic_phases, stiffness_amplitudes
 from .._engine.system import System
 from .train import MEMBERS, Train, member_index, member_paths
 
 
-def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = None) -> System:
+def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = None,
+             layout: TorusLayout | None = None) -> System:
     """The train in ``gear`` (default: the first) as a :class:`System`.
+
+    Excitation frequencies: with ``layout`` ``None``, multiples ``mu`` of the gear's one
+    common base (``kin.mu``: a periodic system); with a
+    :class:`~gearjax._gear.frequency_groups.TorusLayout`, each stage and ripple order
+    on its group's torus angle, ``Omega`` the base of the first group (model.md,
+    "Incommensurate stages").
 
     Housing springs: ``housing.braked`` for members in the gear's ``brakes``,
     ``housing.free`` for every other central member; engaged couplings as springs
@@ -41,7 +49,7 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
               + [s.transmission_error.ring.shape[0] for s in train.stages])
     M = jnp.zeros((n, n))
     W_rows, kbar, k_cos, k_sin, back, damp, te_cos, te_sin, radius = ([] for _ in range(9))
-    mesh_mu, labels, groups, sides, planets = [], [], [], [], []
+    mesh_mu, mesh_angle, labels, groups, sides, planets = [], [], [], [], [], []
     dof_labels, dof_group, dof_kind = [], [], []
     offset = 0
     for s, sk in zip(train.stages, kin.stages):
@@ -59,7 +67,11 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
         dof_kind += ["central"] * 3 + ["planet"] * N
 
         turning = sk.mesh_frequency != 0
-        mu_n = kin.mu[train.stages.index(s)] if (turning and kin.mu is not None) else 0
+        if layout is not None:
+            angle_n, mu_n = layout.stage.get(s.id, (0, 0))
+        else:
+            angle_n = 0
+            mu_n = kin.mu[train.stages.index(s)] if (turning and kin.mu is not None) else 0
         phases_s, phases_r = harmonic_phases(s, sk.sigma, train.phasing, max(H, H_e))
         for side, i_j, r_j, I_j, sign, phases in (
             ("sun", i_s, r_s, I.sun, 1.0, phases_s),
@@ -87,6 +99,7 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
                 damp.append(c)
                 radius.append(r_j)
                 mesh_mu.append(mu_n)
+                mesh_angle.append(angle_n)
                 labels.append(f"{s.id}.{side[0]}p{i + 1}")
                 groups.append(s.id)
                 sides.append(side)
@@ -114,7 +127,10 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
         f_cos=f_cos,
         f_sin=f_sin,
         mesh_mu=tuple(mesh_mu),
-        forcing_mu=tuple(kin.ripple_mu),
+        forcing_mu=tuple(kin.ripple_mu) if layout is None else tuple(m for _, m in layout.ripple),
+        mesh_angle=tuple(mesh_angle) if layout is not None else (),
+        forcing_angle=tuple(g for g, _ in layout.ripple) if layout is not None else (),
+        angle_ratio=tuple(float(r) for r in layout.ratio) if layout is not None else (1.0,),
         spring_class=spring_class,
         contact_damping=train.mesh_damping == "contact",
         dof_labels=tuple(dof_labels),

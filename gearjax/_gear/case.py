@@ -17,6 +17,7 @@ from .._engine.system import System
 from .._errors import bad_argument, fail
 from .._io.results import mesh_coordinates
 from .assembly import assemble
+from .frequency_groups import TorusLayout, gear_frequency_groups, torus_layout
 from .kinematics import Kinematics, kinematics, require_base
 from .train import Gear, Train
 
@@ -58,10 +59,14 @@ class GearCase:
     """A gear prepared for solving at reference-stage mesh frequencies.
 
     **Fields:** ``train``; ``gear`` (:class:`~gearjax.Gear`); ``kin``
-    (:class:`~gearjax.Kinematics`); ``mu``: the gear's coprime multipliers, stage order;
-    ``stage``: the reference stage id; ``mu_ref``: its multiplier; ``system``: the
-    assembled :class:`~gearjax.System` (backlash removed when ``linear``);
-    ``linear``; ``F_static`` ``(m,)``: static mesh forces (N).
+    (:class:`~gearjax.Kinematics`); ``mu``: each stage's mesh frequency over the base
+    frequency ``Omega``, stage order (the gear's coprime integer multipliers for a
+    periodic system; on a torus floats, ``Omega`` the base of the first frequency
+    group); ``stage``: the reference stage id; ``mu_ref``: its entry of ``mu``;
+    ``system``: the assembled :class:`~gearjax.System` (backlash removed when
+    ``linear``); ``linear``; ``F_static`` ``(m,)``: static mesh forces (N); ``layout``:
+    the :class:`~gearjax._gear.frequency_groups.TorusLayout` of a torus system, ``None``
+    for a periodic one.
     """
 
     train: Train
@@ -73,6 +78,12 @@ class GearCase:
     system: System
     linear: bool
     F_static: np.ndarray
+    layout: TorusLayout | None = None
+
+    @property
+    def G(self) -> int:
+        """Torus angles of the system (1: periodic)."""
+        return self.system.n_angles
 
     def omega(self, f_hz) -> np.ndarray:
         """Base frequency Omega (rad/s) at reference-stage mesh frequencies ``f_hz`` (Hz)."""
@@ -96,23 +107,58 @@ class GearCase:
         )
 
 
+def torus_fields(case: GearCase) -> dict | None:
+    """What a study of ``case`` solves on its torus, for datasets and JSON (``None`` for a
+    periodic system): ``G``; ``angle_ratio`` (each angle's base frequency over angle 0's,
+    floats) and ``angle_ratio_exact`` (fractions, as text); ``stage_angle`` ``{stage id:
+    [angle, multiplier]}``; ``ripple_angle`` ``[[angle, multiplier], ...]``;
+    ``truncation`` (the set, :data:`gearjax._studies.harmonics.TORUS_TRUNCATION`); and the
+    stability's near return, ``return_turns`` and ``return_drift``
+    (:func:`gearjax._engine.floquet.return_turns`)."""
+    from .._engine.floquet import return_turns
+    from .._studies.harmonics import TORUS_TRUNCATION
+
+    if case.layout is None:
+        return None
+    q, d = return_turns(case.system.angle_ratio)
+    return {"G": case.layout.G, "angle_ratio": [float(r) for r in case.layout.ratio],
+            "angle_ratio_exact": [str(r) for r in case.layout.ratio],
+            "stage_angle": {k: list(v) for k, v in case.layout.stage.items()},
+            "ripple_angle": [list(v) for v in case.layout.ripple],
+            "truncation": TORUS_TRUNCATION, "return_turns": q, "return_drift": d}
+
+
 def gear_case(train: Train, gear: str | None = None, stage: str | None = None,
-              linear: bool = False) -> GearCase:
+              linear: bool = False, torus: bool = False) -> GearCase:
     """Assemble ``gear`` for solving at mesh frequencies of reference stage ``stage``.
 
-    ``TrainError`` for a gear where no
-    mesh turns, an unknown or non-turning stage, or backlash on an unloaded stage
-    without ``drag_torque`` (unless ``linear``, which drops the backlash).
+    ``torus``: where the gear's frequencies fall in ``G > 1`` groups
+    (:func:`~gearjax.gear_frequency_groups`), assemble the torus system of model.md,
+    "Incommensurate stages" (one angle per group); otherwise (and always for one group)
+    the periodic system of the common base.
+
+    **Raises:** ``TrainError`` for a gear where no mesh turns, no common base within
+    the periodic balance's limit (a periodic system of such a gear), an unknown or
+    non-turning stage, or backlash on an unloaded stage without ``drag_torque``
+    (unless ``linear``, which drops the backlash).
     """
     g = train.gear(gear)
     kin = kinematics(train, g.name)
-    mu = require_base(kin, train.source)
+    layout = None
+    if torus and kin.mu is not None:
+        groups = gear_frequency_groups(kin, train.source)
+        layout = torus_layout(kin, groups) if groups.G > 1 else None
+    if layout is None:
+        mu = require_base(kin, train.source)
+    else:
+        mu = tuple(float(layout.ratio[layout.stage[s.id][0]] * layout.stage[s.id][1])
+                   if s.id in layout.stage else 0.0 for s in kin.stages)
     ref = reference_stage(train, kin, stage)
-    system = assemble(train, g.name, kin)
+    system = assemble(train, g.name, kin, layout)
     if linear:
         system = dataclasses.replace(system, backlash=jnp.zeros_like(system.backlash))
     else:
         check_unloaded(train, g, kin, system)
     return GearCase(train=train, gear=g, kin=kin, mu=tuple(mu), stage=ref,
                     mu_ref=mu[train.stage_ids.index(ref)], system=system, linear=linear,
-                    F_static=np.asarray(static_mesh_forces(system)))
+                    F_static=np.asarray(static_mesh_forces(system)), layout=layout)

@@ -88,6 +88,38 @@ def gear_frequency_groups(kin: Kinematics, source: str | None = None,
         raise fail(source, f"gears.{kin.gear}", kin.gear, str(e)) from None
 
 
+@dataclasses.dataclass(frozen=True)
+class TorusLayout:
+    """Where a gear's excitation sits on the torus of its frequency groups.
+
+    **Fields:** ``stage`` ``{stage id: (angle, multiplier)}`` for every turning stage;
+    ``ripple`` ``((angle, multiplier), ...)`` per ripple order, in the gear's order;
+    ``ratio``: each angle's base frequency over angle 0's (exact); ``G``.
+    """
+
+    stage: Mapping[str, tuple[int, int]]
+    ripple: tuple[tuple[int, int], ...]
+    ratio: tuple[Fraction, ...]
+
+    @property
+    def G(self) -> int:
+        return len(self.ratio)
+
+
+def torus_layout(kin: Kinematics, groups: FrequencyGroups) -> TorusLayout:
+    """The torus angle and multiplier of every turning stage and ripple order of ``kin``
+    (grouped by :func:`gear_frequency_groups`); angle 0 is the first group."""
+    def place(name: str) -> tuple[int, int]:
+        g = groups.group_of(name)
+        return g, groups.groups[g].multipliers[groups.groups[g].members.index(name)]
+
+    stage = {s.id: place(f"stage {s.id}") for s in kin.stages if s.turning}
+    ripple = tuple(place(f"ripple {_number(kin.base * mu)}") for mu in kin.ripple_mu)
+    base = groups.groups[0].base
+    return TorusLayout(stage=stage, ripple=ripple,
+                       ratio=tuple(g.base / base for g in groups.groups))
+
+
 def group_frequencies(frequencies: Mapping[str, Fraction],
                       max_multiplier: int = MAX_MULTIPLIER) -> FrequencyGroups:
     """Group named positive exact ``frequencies`` by the rule of the module docstring.

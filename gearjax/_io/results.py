@@ -210,6 +210,61 @@ def sweep_dataset(
     return xr.Dataset(data, coords=coords, attrs=global_attrs)
 
 
+def add_displacement_waves(ds: xr.Dataset, X, dof_labels: Sequence[str], orders,
+                           waves, rates, units: str = "rad") -> xr.Dataset:
+    """``ds`` with the member displacement coefficients of its points on a torus
+    (model.md, "Incommensurate stages"): the torus counterpart of
+    :func:`add_displacement_harmonics`.
+
+    **Arguments:** ``X``: one ``(2P_p+1, n)`` array per point (coefficient rows of the
+    point's basis, :mod:`gearjax._engine.aft`); ``orders`` ``(P, G)``: each point's orders
+    ``K_g``; ``waves``: per point the ``P_p`` wave vectors of its half set (tuples of
+    ``G`` ints), row order; ``rates`` ``(G,)``: each angle's rate over ``Omega``.
+
+    **Adds:** coordinate ``wave_vector`` ``(wave, angle)`` (the union of the points' wave
+    vectors, the zero vector first) and ``wave_frequency`` ``(wave,)`` (``k . rates``,
+    times ``Omega``); ``displacement_cos`` and ``displacement_sin`` ``(point, dof,
+    wave)``: ``x_i(t) = sum_k cos[., i, k] cos(k . theta) + sin[., i, k] sin(k .
+    theta)``, ``theta_g = rates[g] Omega t`` (0 where a point's set lacks ``k``); and
+    ``harmonics`` ``(point, angle)``, the orders.
+    """
+    P = ds.sizes["point"]
+    K = np.asarray(orders, dtype=np.int64).reshape(P, -1)
+    G = K.shape[1]
+    union = [(0,) * G]
+    index = {union[0]: 0}
+    for ws in waves:
+        for k in ws:
+            if tuple(k) not in index:
+                index[tuple(k)] = len(union)
+                union.append(tuple(int(v) for v in k))
+    n = len(dof_labels)
+    cos = np.zeros((P, n, len(union)))
+    sin = np.zeros((P, n, len(union)))
+    for p, (Xp, ws) in enumerate(zip(X, waves)):
+        Xp = _check(f"X[{p}]", np.asarray(Xp, dtype=float), (2 * len(ws) + 1, n))
+        cols = np.asarray([index[tuple(k)] for k in ws], dtype=np.int64)
+        cos[p, :, 0] = Xp[0]
+        cos[p, :, cols] = Xp[1::2]
+        sin[p, :, cols] = Xp[2::2]
+    vectors = np.asarray(union, dtype=np.int64)
+    ds = ds.assign_coords(dof=("dof", np.asarray(list(dof_labels), dtype=str)),
+                          wave_vector=(("wave", "angle"), vectors),
+                          wave_frequency=("wave", vectors @ np.asarray(rates, float)))
+    ds["wave_vector"].attrs.update(units="1", long_name="wave vector k of the torus angles")
+    ds["wave_frequency"].attrs.update(units="1", long_name="k . rates: the frequency of the "
+                                      "wave over Omega")
+    ds["harmonics"] = (("point", "angle"), K, {
+        "units": "1", "long_name": "orders K_g of the point's truncation set, per torus angle"})
+    for name, value, what in (("displacement_cos", cos, "cosine"),
+                              ("displacement_sin", sin, "sine")):
+        ds[name] = (("point", "dof", "wave"), value, {
+            "units": units,
+            "long_name": f"{what} coefficient of the member displacement per wave vector "
+                         "(the zero vector: the mean)"})
+    return ds
+
+
 def add_displacement_harmonics(ds: xr.Dataset, X, dof_labels: Sequence[str],
                                harmonics, units: str = "rad") -> xr.Dataset:
     """``ds`` with the member displacement harmonics of its points.
@@ -367,7 +422,8 @@ def points_json(ds: xr.Dataset) -> list[dict]:
 
     Each point: ``mesh_frequency_hz``, ``stage_mesh_frequency_hz`` (list, stage order),
     ``input_rpm``, ``result``, ``converged``, ``stable`` (bool or ``None``), ``period``
-    (``None`` unless stored) and ``meshes``: ``{name, stage, side, planet, mean_force,
+    (``None`` unless stored), for a sweep ``branch`` (its solution branch number) and,
+    where the sweep was completed, ``found`` (how that branch was found), and ``meshes``: ``{name, stage, side, planet, mean_force,
     rms_force, max_force, dlf, separation, back_contact, mean_torque}``. NaN and
     infinities become ``None``; a mesh with a ``None`` value gets a ``reason``.
     """
@@ -406,6 +462,10 @@ def points_json(ds: xr.Dataset) -> list[dict]:
             "period": _number(ds["period"].values[k]) if "period" in ds else None,
             "meshes": meshes,
         })
+        if "branch" in ds:  # a sweep: the solution branch, and how it was found
+            points[-1]["branch"] = int(ds["branch"].values[k])
+            if "found" in ds:
+                points[-1]["found"] = str(ds["found"].values[k])
         if "period" in ds and not ds["period"].values[k] > 0:  # 0: no repeat found
             points[-1]["period"] = None
             points[-1]["period_reason"] = ("the orbit did not repeat within the integrated "

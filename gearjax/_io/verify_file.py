@@ -3,6 +3,7 @@ two results Datasets (harmonic balance, time integration) in groups ``hb`` and `
 
 from __future__ import annotations
 
+import json
 import pathlib
 
 import numpy as np
@@ -15,7 +16,8 @@ def save_verify(result, path) -> pathlib.Path:
     """Write ``result`` (a :class:`gearjax._studies.verify.VerifyResult`: ``hb``, ``ni``,
     ``rel_diff``, ``ok``, ``tolerance``) to the NetCDF file ``path`` (h5netcdf): the root group holds
     ``rel_diff`` and ``ok`` ``(point, mesh)`` and the attributes ``kind = "verify"``,
-    ``tolerance``, ``gear``, ``train_toml``, ``gearjax_version``; the groups ``hb`` and
+    ``tolerance``, ``gear``, ``train_toml``, ``gearjax_version`` (and ``reference``, JSON,
+    where the integration reference is windowed statistics); the groups ``hb`` and
     ``ni`` hold the two results Datasets (``_results`` layout). Any other suffix than
     ``.nc`` is refused with a ``ValueError``. **Returns:** the path written."""
     path = pathlib.Path(path)
@@ -33,6 +35,8 @@ def save_verify(result, path) -> pathlib.Path:
                "gear": hb.attrs.get("gear", ""), "train_toml": hb.attrs.get("train_toml", ""),
                "reference_stage": hb.attrs.get("reference_stage", ""),
                "gearjax_version": __version__})
+    if getattr(result, "reference", None) is not None:  # a quasi-periodic gear's windows
+        root.attrs["reference"] = json.dumps(result.reference)
     root.to_netcdf(path, mode="w", engine="h5netcdf")
     result.hb.to_netcdf(path, mode="a", group="hb", engine="h5netcdf")
     result.ni.to_netcdf(path, mode="a", group="ni", engine="h5netcdf")

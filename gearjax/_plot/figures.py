@@ -150,14 +150,19 @@ def response_figure(sweep=None, reference=None, points=None, what: str = "rms",
                             label=tag and tag + labels[1])
                 elif role == "sweep":
                     stable = np.asarray(ds["stable"]) if "stable" in ds else np.full(f.shape, -1)
+                    # one line per branch: a break (NaN) where the branch number changes
+                    number = np.asarray(ds["branch"]) if "branch" in ds else np.zeros(f.size, int)
+                    cut = np.flatnonzero(np.diff(number) != 0) + 1
+                    fb, yb, sb = (np.insert(np.asarray(v, float), cut, np.nan)
+                                  for v in (f, y, stable))
                     for flag, style in ((1, "-"), (0, "--"), (-1, ":")):
                         if not np.any(stable == flag):
                             continue
                         # keep a segment's neighbours so solid and dashed parts join
-                        keep = (stable == flag) | np.r_[stable[1:] == flag, False] | \
-                            np.r_[False, stable[:-1] == flag]
-                        yy = np.where(keep, y, np.nan)
-                        ax.plot(f, yy, style, lw=1.2, color=color,
+                        keep = (sb == flag) | np.r_[sb[1:] == flag, False] | \
+                            np.r_[False, sb[:-1] == flag]
+                        yy = np.where(keep, yb, np.nan)
+                        ax.plot(fb, yy, style, lw=1.2, color=color,
                                 label=tag and tag + labels[0] + {1: "", 0: " (unstable)",
                                                                  -1: " (stability unknown)"}[flag])
                 else:

@@ -18,9 +18,21 @@ Three rules, each derived from the system, none a constant fitted on one train:
    it is exceeded.
 
 And a size rule (:func:`require_size`): the dense factorisation of the condensed
-bordered Jacobian, ``(2K+1) r + 1`` unknowns (``r`` the rank of the mesh projection),
-dominates memory and time. A problem whose estimated memory exceeds ``MEMORY_SHARE``
-of the memory available is refused with the numbers, before any work.
+bordered Jacobian, ``C r + 1`` unknowns (``C = 2K+1`` coefficients, ``r`` the rank of
+the mesh projection), dominates memory and time. A problem whose estimated memory
+exceeds ``MEMORY_SHARE`` of the memory available is refused with the numbers, before
+any work.
+
+**On a torus** (``G > 1`` angles, model.md, "Incommensurate stages") the harmonics are
+orders ``K = (K_1, ..., K_G)``, one per angle, of a truncation set (the diamond by
+default, :data:`TORUS_TRUNCATION`). The same three rules hold per angle: the floor is
+each angle's highest excitation order (:func:`orders_floor`); the first choice
+(:func:`torus_orders_rule`) reaches the response cutoff on each angle's own base
+frequency, in steps of half the floor, at most twice the floor (a cost bound: the set
+holds about ``2 K_1 K_2`` wave vectors for ``G = 2``); and the a posteriori check
+doubles one angle's order at a time (:func:`widened`), so that only the angle that
+needs it grows. ``K`` is an ``int`` for a periodic system and a tuple on a torus
+everywhere in the studies (:func:`as_orders`).
 """
 
 from __future__ import annotations
@@ -35,6 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 
+from .._engine import aft as _aft
 from .._engine import hb as _hb
 from .._errors import bad_argument
 from .._engine.modal import mode_classes
@@ -62,9 +75,67 @@ RMS_FLOOR = 1e-3
 against that share (a relative change of a negligible force is noise)."""
 
 
+TORUS_TRUNCATION = "diamond"
+"""The truncation set of a study's torus harmonic balance (:data:`gearjax.TRUNCATIONS`)."""
+
+
 def excitation_floor(system: System, eta: int = 1) -> int:
-    """The fewest solution harmonics that hold the excitation: its highest order (>= 1)."""
-    return max(_hb.highest_excitation(system, eta), 1)
+    """The fewest solution harmonics that hold the excitation: its highest order (>= 1);
+    on a torus, the largest of the angles' floors (:func:`orders_floor` gives each)."""
+    return max(max(_hb.highest_excitation(system, eta, g), 1) for g in range(system.n_angles))
+
+
+def orders_floor(system: System, eta: int = 1):
+    """The floor of ``K``: :func:`excitation_floor` (an ``int``) for a periodic system, the
+    highest excitation order of each angle (a tuple) on a torus."""
+    if system.n_angles == 1:
+        return excitation_floor(system, eta)
+    return tuple(max(_hb.highest_excitation(system, eta, g), 1) for g in range(system.n_angles))
+
+
+def as_orders(K):
+    """``K`` as the studies keep it: an ``int`` (periodic) or a tuple of ints (torus; a
+    list, e.g. read back from JSON, becomes a tuple)."""
+    if isinstance(K, (tuple, list, np.ndarray)):
+        return tuple(int(k) for k in K)
+    return int(K)
+
+
+def orders_text(K) -> str:
+    """``K`` in words: ``"32"`` or ``"(8, 6)"``."""
+    K = as_orders(K)
+    return str(K) if isinstance(K, int) else "(" + ", ".join(str(k) for k in K) + ")"
+
+
+def settings_for(system: System, K, **fields) -> _hb.HarmonicBalance:
+    """The harmonic-balance settings of orders ``K`` on ``system`` (the torus truncation
+    set :data:`TORUS_TRUNCATION` where ``K`` is a tuple)."""
+    K = as_orders(K)
+    if isinstance(K, tuple):
+        fields.setdefault("truncation", TORUS_TRUNCATION)
+    return _hb.HarmonicBalance(n_harmonics=K, **fields)
+
+
+def torus_orders_rule(system: System, omega: float, *, cutoff_hz: float) -> tuple[int, ...]:
+    """First choice of the orders ``K_g`` at base frequency ``omega`` (rad/s) on a torus:
+    per angle ``g`` of base frequency ``angle_ratio[g] omega / (2 pi)`` Hz, enough orders
+    to reach ``cutoff_hz``, rounded up to a step of half the angle's floor
+    (:func:`orders_floor`), at least the floor and at most twice it."""
+    out = []
+    for floor, ratio in zip(orders_floor(system), system.angle_ratio):
+        base = max(ratio * omega / (2 * math.pi), 1e-9)
+        step = max(1, floor // 2)
+        k = step * math.ceil(cutoff_hz / base / step)
+        out.append(int(min(max(k, floor), 2 * floor)))
+    return tuple(out)
+
+
+def widened(K, g: int):
+    """Orders ``K`` with angle ``g``'s doubled (``2K`` for a periodic ``int``)."""
+    K = as_orders(K)
+    if isinstance(K, int):
+        return 2 * K
+    return tuple(2 * k if i == g else k for i, k in enumerate(K))
 
 
 def response_cutoff_hz(system: System) -> float:
@@ -92,14 +163,17 @@ def harmonics_rule(base_hz: float, min_harmonics: int, eta: int = 1, *,
 
 def require_harmonics(system: System, K: int, eta: int = 1, *,
                       argument: str = "harmonics") -> None:
-    """Refuse ``K`` below the excitation floor.
+    """Refuse ``K`` below the excitation floor (on a torus: below any angle's floor; one
+    ``K`` then stands for every angle).
 
     **Raises:** ``ArgumentError`` (a ``TrainError``) naming ``argument``, the caller's
     name for ``K``."""
     floor = excitation_floor(system, eta)
     if int(K) != K or K < floor:
-        raise bad_argument(argument, K, f"the solution needs at least {floor} harmonics: "
-                           f"{floor_reason(system, eta)}; fewer cannot hold the excitation")
+        where = " on every torus angle" if system.n_angles > 1 else ""
+        raise bad_argument(argument, K, f"the solution needs at least {floor} harmonics"
+                           f"{where}: {floor_reason(system, eta)}; fewer cannot hold the "
+                           "excitation")
 
 
 def floor_reason(system: System, eta: int = 1) -> str:
@@ -115,22 +189,38 @@ def floor_reason(system: System, eta: int = 1) -> str:
 # ----------------------------------------------------------------------------- size
 
 
-def factor_unknowns(system: System, K: int) -> int:
-    """Unknowns of the bordered factorisation, ``(2K+1) r + 1``: ``r`` the motions that
-    deflect a mesh where the solves condense the others out (``_hb.mesh_null_space``),
-    else every degree of freedom."""
+def torus_basis_of(system: System, K) -> _aft.Basis:
+    """The torus truncation set of orders ``K`` on ``system`` (:data:`TORUS_TRUNCATION`;
+    the grid is the smallest that carries it: for its wave vectors, not for an AFT)."""
+    K = as_orders(K)
+    return _aft.torus_basis(K, [2 * k + 2 for k in K], system.angle_ratio, TORUS_TRUNCATION)
+
+
+def coefficient_count(system: System, K) -> int:
+    """Coefficient rows ``C`` of the solution: ``2K+1``, or ``2P+1`` for the ``P`` wave
+    vectors of the torus truncation set of orders ``K``."""
+    K = as_orders(K)
+    if isinstance(K, int):
+        return 2 * K + 1
+    return torus_basis_of(system, K).n_coefficients
+
+
+def factor_unknowns(system: System, K) -> int:
+    """Unknowns of the bordered factorisation, ``C r + 1`` (:func:`coefficient_count`):
+    ``r`` the motions that deflect a mesh where the solves condense the others out
+    (``_hb.mesh_null_space``), else every degree of freedom."""
     null = _hb.mesh_null_space(system.W)
     r = system.n_dof - (0 if null is None else null.shape[1])
-    return (2 * K + 1) * r + 1
+    return coefficient_count(system, K) * r + 1
 
 
-def memory_bytes(system: System, K: int) -> int:
+def memory_bytes(system: System, K) -> int:
     """Estimated peak memory (bytes) of one Newton or continuation step at ``K``: the
     condensed matrix, its LU and the products that assemble it (about four copies of
     ``N^2`` doubles), and the per-mesh Jacobian blocks with their projections
-    (``m (2K+1)^2 (r + 2)`` doubles)."""
+    (``m C^2 (r + 2)`` doubles)."""
     N = factor_unknowns(system, K)
-    C = 2 * K + 1
+    C = coefficient_count(system, K)
     r = (N - 1) // C
     return 8 * (4 * N * N + system.n_meshes * C * C * (r + 2))
 
@@ -172,21 +262,25 @@ def factor_seconds(system: System, K: int) -> float:
     return (2 / 3) * factor_unknowns(system, K) ** 3 / _lu_rate()
 
 
-def require_size(system: System, K: int, *, argument: str = "harmonics", mu=None) -> None:
+def require_size(system: System, K, *, argument: str = "harmonics", mu=None,
+                 value=None) -> None:
     """Refuse ``K`` where one factorisation would not fit in ``MEMORY_SHARE`` of the
     available memory.
 
     **Raises:** ``ArgumentError`` (a ``TrainError``) naming ``argument`` (the caller's
-    name for ``K``), ``mu``, K, the unknowns, the memory and a time estimate."""
+    name for ``K``) with ``value`` (what the caller gave; default ``K``), ``mu``, K, the
+    unknowns, the memory and a time estimate."""
     need, avail = memory_bytes(system, K), available_memory()
     if need <= MEMORY_SHARE * avail:
         return
     N = factor_unknowns(system, K)
     mu_text = f"mu = {list(mu)}: " if mu is not None else ""
-    raise bad_argument(argument, K, f"{mu_text}{K} harmonics make a factorisation of {N} "
+    kind = "periodic" if isinstance(as_orders(K), int) else "torus"
+    raise bad_argument(argument, orders_text(K) if value is None else value,
+                       f"{mu_text}{orders_text(K)} harmonics make a factorisation of {N} "
                        f"unknowns, about {_size(need)} of the {_size(avail)} available "
                        f"(at most {MEMORY_SHARE:.0%}) and about "
-                       f"{factor_seconds(system, K):.0f} s each: too large for the periodic "
+                       f"{factor_seconds(system, K):.0f} s each: too large for the {kind} "
                        "harmonic balance; reduce stiffness_harmonics or the "
                        "transmission-error harmonics, or integrate in time (gearjax "
                        "simulate)")
@@ -206,17 +300,18 @@ share) the check is skipped and the result says so. A size, not a timing: the de
 is the same on every run."""
 
 
-def check_affordable(system: System, K: int) -> str | None:
-    """``None`` where the truncation check of a point at ``K`` (a solve at ``2 K``) fits
-    ``MAX_CHECK_UNKNOWNS`` and the memory share; else why not, in words."""
-    K2 = 2 * K
+def check_affordable(system: System, K, g: int = 0) -> str | None:
+    """``None`` where the truncation check of a point at ``K`` (a solve at ``2 K``; on a
+    torus with angle ``g``'s order doubled, :func:`widened`) fits ``MAX_CHECK_UNKNOWNS``
+    and the memory share; else why not, in words."""
+    K2 = widened(K, g)
     N = factor_unknowns(system, K2)
     if N > MAX_CHECK_UNKNOWNS:
-        return (f"a check at K = {K2} would factorise {N} unknowns, more than "
+        return (f"a check at K = {orders_text(K2)} would factorise {N} unknowns, more than "
                 f"{MAX_CHECK_UNKNOWNS}")
     need, avail = memory_bytes(system, K2), available_memory()
     if need > MEMORY_SHARE * avail:
-        return (f"a check at K = {K2} would need about {_size(need)} of the "
+        return (f"a check at K = {orders_text(K2)} would need about {_size(need)} of the "
                 f"{_size(avail)} available")
     return None
 
@@ -226,14 +321,14 @@ def truncation_change(problem: _hb.HBProblem, wide: _hb.HBProblem, y, omega,
     """The truncation estimate of a converged point: the largest relative change of a
     mesh's RMS alternating force when the point ``y`` (scaled unknowns of ``problem``)
     at base frequency ``omega`` (rad/s) is solved again with ``wide``, the same problem
-    with twice the harmonics (Newton from ``y`` padded with zeros). Meshes below
+    with twice the harmonics (on a torus: one angle's, :func:`widened`; Newton from
+    ``y`` padded with zeros). Meshes below
     ``RMS_FLOOR`` of the largest RMS are judged against that share.
 
     **Returns:** the change; ``inf`` where the doubled solve does not converge.
     """
     C, n = problem.shape
-    y2 = np.zeros(wide.shape)
-    y2[:C] = np.asarray(y).reshape(C, n)
+    y2 = _aft.resize(problem.basis, wide.basis, np.asarray(y).reshape(C, n))
     sol = newton_jit(wide, jnp.asarray(omega, float), jnp.asarray(y2.reshape(-1)))
     if not bool(sol.converged):
         return math.inf

@@ -19,6 +19,21 @@ says after how many base periods it repeats, 0 none found), ``max_steps``,
 classify stability; a stable orbit is what it tends to). Responses are statistics of
 the last base period (:func:`~gearjax._engine.responses.responses_from_samples`, the same
 definition as the harmonic balance); a failed point has NaN responses and its code.
+
+**Quasi-periodic gears.** Where the gear's mesh frequencies fall in ``G > 1``
+incommensurate groups (:func:`~gearjax.gear_frequency_groups`; the case is assembled
+with ``torus=True``, model.md, "Incommensurate stages") the response has no period and
+the periodic search has nothing to find: each point is integrated in windows
+(:func:`~gearjax._engine.windowed.simulate_windowed`, :class:`~gearjax.Windowed`
+settings, default :data:`WINDOWED`) until consecutive windows' statistics agree. Its
+``result`` is ``quasi_periodic`` (converged: the statistics are stationary),
+``not_stationary`` (the windows ran out without agreeing: a long transient, a
+locking or chaotic response; the last window's statistics are kept, not converged),
+``max_steps``, ``solver_failed`` or ``nonfinite`` (NaN responses); ``period`` is 0
+(none); the responses are the last window's statistics. A sweep continues each point
+from the previous end state *and phase*: the next point's excitation is the previous
+one's clock shifted by the time integrated (:func:`time_shifted`), so no mesh phase
+jumps between points. A periodic gear (``G = 1``) is integrated as before.
 """
 
 from __future__ import annotations
@@ -29,19 +44,29 @@ import time
 from collections.abc import Callable, Sequence
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from .._engine import time_domain as td
+from .._engine import windowed as wd
 from .._errors import bad_argument
 from .._engine.responses import responses_from_samples
 from .._engine.results import result_word
 from .._io.results import sweep_dataset
-from .._gear.case import GearCase, gear_case
+from .._engine.system import System
+from .._gear.case import GearCase, gear_case, torus_fields
 from .._gear.toml_io import dumps_train
 from .._gear.train import Train
 
 DEFAULT_SWEEP_POINTS = 20
 """Points of a ``from_hz``/``to_hz`` sweep when ``points`` is not given."""
+
+WINDOWED = wd.Windowed()
+"""Windowed-integration settings of a quasi-periodic gear where the caller gives none
+(read at each call)."""
+
+STATIONARY_WORDS = ("quasi_periodic", "not_stationary")
+"""Windowed results whose last window's statistics are kept (the others have none)."""
 
 def frequency_points(at_hz: Sequence[float] | None = None, from_hz: float | None = None,
                      to_hz: float | None = None, points: int | None = None
@@ -131,6 +156,135 @@ def trajectory_dataset(case: GearCase, f_hz, tr: td.Trajectory, solver: dict | N
     return ds
 
 
+# ---------------------------------------------------------------- quasi-periodic gears
+
+
+def time_shifted(system: System, tau0: float) -> System:
+    """``system`` with its clock started at base phase ``tau0 = Omega t0`` (rad): its
+    stiffness, transmission-error and forcing series at ``tau`` are ``system``'s at
+    ``tau + tau0`` (each harmonic's cosine and sine coefficients rotated by its phase
+    ``h r tau0``, ``r`` the series' rate over ``Omega``). The static fields are the same,
+    so a compiled integration of ``system`` runs the shifted one too."""
+    def rotate(c, s_, rates):
+        if c.shape[-1] == 0 or len(rates) == 0:
+            return c, s_
+        h = np.arange(1, c.shape[-1] + 1)
+        a = np.mod(np.outer(np.asarray(rates, float), h) * float(tau0), 2 * np.pi)
+        ca, sa = jnp.asarray(np.cos(a)), jnp.asarray(np.sin(a))
+        return c * ca + s_ * sa, s_ * ca - c * sa
+
+    rates = system.mesh_rates()
+    k_cos, k_sin = rotate(system.k_cos, system.k_sin, rates)
+    te_cos, te_sin = rotate(system.te_cos, system.te_sin, rates)
+    f_cos, f_sin = system.f_cos, system.f_sin
+    if system.forcing_mu:  # one phase per column: the columns' own rates, h = 1
+        a = np.mod(np.asarray(system.forcing_rates(), float) * float(tau0), 2 * np.pi)
+        ca, sa = jnp.asarray(np.cos(a)), jnp.asarray(np.sin(a))
+        f_cos, f_sin = f_cos * ca + f_sin * sa, f_sin * ca - f_cos * sa
+    return dataclasses.replace(system, k_cos=k_cos, k_sin=k_sin, te_cos=te_cos,
+                               te_sin=te_sin, f_cos=f_cos, f_sin=f_sin)
+
+
+def integrate_windowed(case: GearCase, f_hz, is_sweep: bool, x0=None, v0=None,
+                       settings: wd.Windowed | None = None,
+                       batch_size="auto") -> wd.WindowedResponse:
+    """Windowed statistics of ``case`` at ``f_hz`` (Hz): independent points or a sweep
+    (module docstring, "Quasi-periodic gears"). ``x0``, ``v0``: ``(n,)`` or ``(P, n)``
+    start states (sweeps: ``(n,)``), None for the static solution in contact;
+    ``settings``: :class:`~gearjax.Windowed` (default :data:`WINDOWED`); ``batch_size``
+    as :func:`~gearjax.simulate_windowed_points` (``"auto"``: one point at a time on a
+    CPU, every point through the same compiled program).
+
+    **Returns:** a :class:`~gearjax.WindowedResponse` with a leading axis ``P``.
+    **Raises:** ``ValueError`` as :func:`~gearjax.simulate_windowed` (a window too long,
+    a tolerance below ``1 / n_beats``)."""
+    s = case.system
+    settings = WINDOWED if settings is None else settings
+    omegas = case.omega(f_hz)
+    if x0 is None:
+        x0, v0 = td.contact_state(s)
+    x0 = jnp.asarray(x0, dtype=float)
+    v0 = jnp.zeros_like(x0) if v0 is None else jnp.asarray(v0, dtype=float)
+    if is_sweep:
+        outs, tau, x, v = [], 0.0, x0, v0
+        for w in omegas:
+            out = wd.simulate_windowed(time_shifted(s, tau), float(w), x0=x, v0=v,
+                                       settings=settings)
+            tau += 2 * np.pi * int(out.windows) * out.plan.periods  # the clock goes on
+            x, v = out.x_end, out.v_end
+            outs.append(out)
+        return jax.tree.map(lambda *a: jnp.stack(a), *outs)
+    size = _batch_size(batch_size)
+    if size != 1:
+        return wd.simulate_windowed_points(s, omegas, x0=x0, v0=v0, settings=settings,
+                                           batch_size=size)
+    x0 = jnp.broadcast_to(x0, (len(omegas), s.n_dof))
+    v0 = jnp.broadcast_to(v0, (len(omegas), s.n_dof))
+    outs = [wd.simulate_windowed(s, float(w), x0=x0[i], v0=v0[i], settings=settings)
+            for i, w in enumerate(omegas)]
+    return jax.tree.map(lambda *a: jnp.stack(a), *outs)
+
+
+def windowed_dataset(case: GearCase, f_hz, out: wd.WindowedResponse,
+                     solver: dict | None = None, attrs: dict | None = None):
+    """The results Dataset (``_results`` layout) of windowed integrations ``out`` at
+    ``f_hz`` (Hz), as :func:`trajectory_dataset`: ``result`` a windowed word,
+    ``converged`` where ``quasi_periodic``, ``period`` 0 (none), the responses of the last
+    window (NaN where no statistics: failed points). Adds per point ``periods`` (base
+    periods integrated), ``num_steps``, ``num_rejected``, ``windows`` (windows
+    integrated), ``window_s`` (the window length, s) and ``window_change`` (the last
+    window's largest relative change of a mesh's mean or RMS from the one before, NaN
+    with fewer than two windows)."""
+    words = np.asarray(result_word(out.result), dtype=str).reshape(-1)
+    kept = np.isin(words, STATIONARY_WORDS)
+    resp = jax.tree.map(lambda a: np.where(kept[:, None], np.asarray(a), np.nan),
+                        out.responses)
+    windows = np.asarray(out.windows).reshape(-1)
+    change = np.asarray(out.change)
+    last = np.array([change[i, w - 1] if w >= 2 else np.nan for i, w in enumerate(windows)])
+    ds = sweep_dataset(
+        resp, **case.point_coordinates(f_hz),
+        result=list(words),
+        converged=words == "quasi_periodic",
+        stable=None,
+        period=np.zeros(len(words)),
+        static_force=case.F_static,
+        train_toml=dumps_train(case.train),
+        gear=case.gear.name,
+        solver=solver,
+        attrs={"reference_stage": case.stage, **(attrs or {})},
+    )
+    for name, value, units, long_name in (
+            ("periods", windows * out.plan.periods, "1", "base periods integrated"),
+            ("num_steps", out.stats["num_steps"], "1", "accepted solver steps"),
+            ("num_rejected", out.stats["num_rejected"], "1", "rejected solver steps"),
+            ("windows", windows, "1", "windows integrated"),
+            ("window_s", out.window_time, "s", "length of a window"),
+            ("window_change", last, "1", "largest relative change of a mesh's mean or RMS "
+                                         "force from the window before, last window")):
+        ds[name] = ("point", np.asarray(value).reshape(-1),
+                    {"units": units, "long_name": long_name})
+    return ds
+
+
+def windowed_settings(case: GearCase, settings: wd.Windowed | None = None) -> dict:
+    """The windowed integration of ``case`` as a JSON-able dict: ``method`` (``windowed
+    time integration``), the :class:`~gearjax.Windowed` fields, the window plan
+    (``window_periods``, ``samples_per_period``, ``slowest_beat``: the slowest
+    non-integer excitation frequency or beat over ``Omega``) and ``torus``
+    (:func:`~gearjax._gear.case.torus_fields`). **Raises:** ``ValueError`` as
+    :func:`~gearjax.window_plan`."""
+    settings = WINDOWED if settings is None else settings
+    plan = wd.window_plan(case.system, settings)
+    out = {"method": "windowed time integration", "solver": type(settings.solver).__name__}
+    for f in dataclasses.fields(settings):
+        if f.name != "solver":
+            out[f.name] = getattr(settings, f.name)
+    out.update(window_periods=plan.periods, samples_per_period=plan.samples,
+               slowest_beat=plan.slowest, torus=torus_fields(case))
+    return out
+
+
 def solver_settings(settings: td.TimeDomain) -> dict:
     """The :class:`~gearjax.TimeDomain` settings as a JSON-able dict."""
     out = {"method": "time integration", "solver": type(settings.solver).__name__}
@@ -156,6 +310,7 @@ def simulate_gear(
     batch_size: int | None | str = "auto",
     progress: Callable[[str], None] | None = None,
     command: str | None = None,
+    windowed: wd.Windowed | None = None,
 ):
     """Steady-state time integration of ``gear`` at reference-stage mesh frequencies.
 
@@ -174,19 +329,26 @@ def simulate_gear(
       :func:`~gearjax.simulate_points` (``"auto"``: 1 on a CPU, all on an accelerator);
     - ``progress(message)``: called before and after the integration;
     - ``command``: how the simulation was asked for, kept as the ``command`` attribute
-      (default: empty).
+      (default: empty);
+    - ``windowed``: :class:`~gearjax.Windowed` settings of a quasi-periodic gear
+      (``G > 1``, module docstring; default :data:`WINDOWED`); ``settings`` then unused.
 
     **Returns:** an ``xarray.Dataset`` (``_results`` layout: ``result``, ``converged``,
     ``stable`` unknown, ``period``, responses; plus ``periods``, ``num_steps``,
-    ``num_rejected``); attributes ``reference_stage``, ``mode`` (``points`` or
-    ``sweep``), ``start``, ``seconds``, ``command``.
+    ``num_rejected``; for a quasi-periodic gear also ``windows``, ``window_s``,
+    ``window_change``, :func:`windowed_dataset`); attributes ``reference_stage``,
+    ``mode`` (``points`` or ``sweep``), ``start``, ``seconds``, ``command``.
 
     **Raises:** ``ArgumentError`` (a ``TrainError``) naming the argument for bad
-    frequencies, and as :func:`gear_case`.
+    frequencies, and as :func:`gear_case`; ``ValueError`` as
+    :func:`~gearjax.window_plan` for ``windowed`` settings that do not fit the gear.
     """
     t0 = time.perf_counter()
     f_hz, is_sweep = frequency_points(at_hz, from_hz, to_hz, points)
-    case = gear_case(train, gear, stage, linear)
+    case = gear_case(train, gear, stage, linear, torus=True)
+    if case.G > 1:
+        return _simulate_torus(case, f_hz, is_sweep, x0, v0, windowed, batch_size, progress,
+                               command, t0)
     if progress:
         progress(f"simulate: integrating {len(f_hz)} points "
                  f"({'sweep' if is_sweep else 'independent'}; the first call compiles)")
@@ -197,6 +359,28 @@ def simulate_gear(
         progress(f"simulate: {len(f_hz)} points in {seconds:.1f} s")
     solver = {**solver_settings(settings), "linear": linear, "reference_stage": case.stage}
     return trajectory_dataset(case, f_hz, tr, solver, attrs={
+        "kind": "simulate", "mode": "sweep" if is_sweep else "points",
+        "start": "static contact" if x0 is None else "given",
+        "seconds": seconds, "command": "" if command is None else command})
+
+
+def _simulate_torus(case: GearCase, f_hz, is_sweep: bool, x0, v0, settings, batch_size,
+                    progress, command, t0):
+    """:func:`simulate_gear` of a quasi-periodic gear (windowed integration)."""
+    solver = {**windowed_settings(case, settings), "linear": case.linear,
+              "reference_stage": case.stage}
+    if progress:
+        progress(f"simulate: integrating {len(f_hz)} points "
+                 f"({'sweep' if is_sweep else 'independent'}) in windows of "
+                 f"{solver['window_periods']} base periods: the {case.G} frequency groups "
+                 "are incommensurate, so the response is quasi-periodic (the first call "
+                 "compiles)")
+    out = integrate_windowed(case, f_hz, is_sweep, x0, v0, settings, batch_size)
+    jax.block_until_ready(out)
+    seconds = time.perf_counter() - t0
+    if progress:
+        progress(f"simulate: {len(f_hz)} points in {seconds:.1f} s")
+    return windowed_dataset(case, f_hz, out, solver, attrs={
         "kind": "simulate", "mode": "sweep" if is_sweep else "points",
         "start": "static contact" if x0 is None else "given",
         "seconds": seconds, "command": "" if command is None else command})

@@ -26,11 +26,29 @@ the dynamic load level of the stage". ``ok`` holds where both methods converged
 (integration: periodic with the base period) and ``rel_diff <= tolerance``: 1% for a
 system without backlash (``linear``, or a train without backlash), 2% with backlash
 (the switches make both methods converge more slowly).
+
+**Quasi-periodic gears** (mesh frequencies in ``G > 1`` incommensurate groups; model.md,
+"Incommensurate stages"): step 1 is the torus harmonic balance, orders ``K = (K_1, ...,
+K_G)`` per point from :func:`~gearjax._studies.harmonics.torus_orders_rule` (or
+``harmonics`` on every angle) on the diamond truncation set, solved and started as
+above (with backlash the homotopy in backlash where Newton fails: a torus has no
+period to settle to); its responses are torus averages and ``stable`` is the torus
+stability verdict. Step 2 integrates from the torus solution's state at ``t = 0``
+(:func:`torus_initial_state`) in windows (:func:`~gearjax._studies.simulate.integrate_windowed`)
+until consecutive windows' statistics agree: the reference is the last window's
+statistics (``VerifyResult.reference`` says the window length, the windows' agreement
+tolerance and how many must agree). An integration point is converged where its result
+is ``quasi_periodic``. Where a non-linear response locks onto a rational winding or
+turns chaotic the torus solution is not what the integration follows: the windows do
+not agree (``not_stationary``: ``rel_diff`` is missing, ``ok`` false) or the two
+differ beyond the tolerance (``ok`` false); the JSON names each point's ``agreement``
+(:data:`AGREEMENT`), never a pass.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from collections.abc import Callable, Sequence
 
@@ -39,13 +57,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import harmonics as _harmonics
+from .._engine import aft as _aft
 from .._engine import hb as _hb
 from .._engine import time_domain as td
 from .._engine.results import RESULTS, result_word
 from .._errors import bad_argument
 from .._io.results import sweep_dataset
 from .._gear.case import GearCase, gear_case
-from .simulate import frequency_points, integrate, solver_settings, trajectory_dataset
+from .._engine import windowed as wd
+from .._gear.case import torus_fields
+from .simulate import (frequency_points, integrate, integrate_windowed, solver_settings,
+                       trajectory_dataset, windowed_dataset, windowed_settings)
 from .sweep import backlash_start, newton, point_rows, resize_harmonics, solve_points, start_point
 from .._gear.toml_io import dumps_train
 from .._gear.train import Train
@@ -65,7 +87,9 @@ class VerifyResult:
     relative to the largest harmonic-balance RMS of the mesh's stage (NaN where a
     method failed); ``ok`` ``(P, m)``: both converged and ``rel_diff <= tolerance``;
     ``tolerance``; ``seconds``: wall time of each method (``harmonic_balance``,
-    ``integration``, with compilation) and ``total``.
+    ``integration``, with compilation) and ``total``; ``reference``: for a quasi-periodic
+    gear, what the integration's statistics are (:func:`window_reference`), ``None`` for a
+    periodic one (its reference is the periodic orbit).
     """
 
     hb: object
@@ -76,6 +100,7 @@ class VerifyResult:
     ok: np.ndarray
     tolerance: float
     seconds: dict
+    reference: dict | None = None
 
     @property
     def all_ok(self) -> bool:
@@ -99,6 +124,7 @@ def verify_gear(
     batch_size: int | None | str = "auto",
     progress: Callable[[str], None] | None = None,
     command: str | None = None,
+    windowed: wd.Windowed | None = None,
 ) -> VerifyResult:
     """RMS mesh forces of ``gear`` by harmonic balance and by time integration.
 
@@ -109,11 +135,14 @@ def verify_gear(
     tolerances on ``rel_diff`` without and with backlash (module docstring);
     ``progress(message)``: called as each method starts and ends; ``command``: how the
     verification was asked for, kept as both datasets' ``command`` attribute (default:
-    empty).
+    empty); ``windowed``: :class:`~gearjax.Windowed` settings of the integration of a
+    quasi-periodic gear (module docstring, "Quasi-periodic gears"; default
+    :data:`gearjax._studies.simulate.WINDOWED`).
 
     **Returns:** :class:`VerifyResult`. **Raises:** ``ArgumentError`` (a ``TrainError``)
     naming the argument for bad frequencies, harmonics or tolerances, and as
-    :func:`~gearjax._gear.case.gear_case`.
+    :func:`~gearjax._gear.case.gear_case`; ``ValueError`` as :func:`~gearjax.window_plan`
+    for ``windowed`` settings that do not fit a quasi-periodic gear.
     """
     t0 = time.perf_counter()
     f_hz, is_sweep = frequency_points(at_hz, from_hz, to_hz, points)
@@ -122,9 +151,12 @@ def verify_gear(
             raise bad_argument(name, tol, "must be a relative tolerance in (0, 1)")
     if harmonics is not None and (int(harmonics) != harmonics or harmonics < 1):
         raise bad_argument("harmonics", harmonics, "must be an integer >= 1")
-    case = gear_case(train, gear, stage, linear)
+    case = gear_case(train, gear, stage, linear, torus=True)
     tolerance = tol_nonlinear if case.has_backlash else tol_linear
     say = progress or (lambda message: None)
+    if case.G > 1:
+        return _verify_torus(case, f_hz, is_sweep, harmonics, tolerance, windowed,
+                             batch_size, say, command, t0)
 
     say(f"verify: harmonic balance at {len(f_hz)} points")
     hb = harmonic_balance_points(case, f_hz, harmonics, follow=is_sweep and case.has_backlash)
@@ -165,6 +197,68 @@ def verify_gear(
                                  "total": time.perf_counter() - t0})
 
 
+def _verify_torus(case: GearCase, f_hz, is_sweep: bool, harmonics, tolerance: float,
+                  settings, batch_size, say, command, t0) -> VerifyResult:
+    """:func:`verify_gear` of a quasi-periodic gear: the torus harmonic balance against
+    the windowed integration from its states (module docstring)."""
+    solver = {"linear": case.linear, "reference_stage": case.stage,
+              "mode": "sweep" if is_sweep else "points"}
+    ni_solver = {**windowed_settings(case, settings), **solver}  # refuses a bad window first
+    say(f"verify: torus harmonic balance at {len(f_hz)} points ({case.G} incommensurate "
+        "frequency groups: the response is quasi-periodic)")
+    hb = harmonic_balance_points(case, f_hz, harmonics, follow=is_sweep and case.has_backlash)
+    t_hb = time.perf_counter() - t0
+    say(f"verify: harmonic balance done in {t_hb:.1f} s; integrating from its states in "
+        f"windows of {ni_solver['window_periods']} base periods until consecutive windows "
+        f"agree within {ni_solver['tol']:g}")
+    good = hb["result"] == result_word(RESULTS.successful)
+    x_static, _ = td.contact_state(case.system)
+    x0 = np.where(good[:, None], hb["x0"], np.asarray(x_static)[None, :])
+    v0 = np.where(good[:, None], hb["v0"], 0.0)
+    out = integrate_windowed(case, f_hz, False, x0, v0, settings, batch_size)
+    jax.block_until_ready(out)
+    t_ni = time.perf_counter() - t0 - t_hb
+    say(f"verify: integration done in {t_ni:.1f} s")
+    common = {"command": "" if command is None else command, "mode": solver["mode"]}
+    hb_ds = sweep_dataset(
+        hb["responses"], **case.point_coordinates(f_hz),
+        result=list(hb["result"]),
+        stable=hb["stable"],
+        static_force=case.F_static,
+        train_toml=dumps_train(case.train),
+        gear=case.gear.name,
+        solver={"method": "torus harmonic balance", "harmonics": harmonics,
+                "truncation": _harmonics.TORUS_TRUNCATION, "torus": torus_fields(case),
+                **solver},
+        attrs={"reference_stage": case.stage, "seconds": t_hb, **common},
+    )
+    hb_ds["harmonics"] = (("point", "angle"), hb["harmonics"], {
+        "units": "1", "long_name": "orders K_g of the point's truncation set, per torus "
+                                   "angle"})
+    ni_ds = windowed_dataset(case, f_hz, out, ni_solver,
+                             attrs={"start": "harmonic balance", "seconds": t_ni, **common})
+    rms_hb, rms_ni, rel, ok = compare_rms(hb_ds, ni_ds, tolerance)
+    return VerifyResult(hb=hb_ds, ni=ni_ds, rms_hb=rms_hb, rms_ni=rms_ni, rel_diff=rel, ok=ok,
+                        tolerance=tolerance,
+                        seconds={"harmonic_balance": t_hb, "integration": t_ni,
+                                 "total": time.perf_counter() - t0},
+                        reference=window_reference(ni_solver))
+
+
+def window_reference(solver: dict) -> dict:
+    """What the integration statistics of a quasi-periodic verification are, from the
+    windowed integration's settings (:func:`~gearjax._studies.simulate.windowed_settings`):
+    ``method``, ``window_periods`` (base periods per window), ``n_beats`` (cycles of the
+    slowest beat a window spans), ``agreement_tolerance`` (consecutive windows' relative
+    agreement of the mean and RMS mesh forces), ``n_agree``, ``transient_windows``,
+    ``max_windows``, and ``statistics``: the responses are those of the last window."""
+    return {"method": "windowed time integration", "window_periods": solver["window_periods"],
+            "n_beats": solver["n_beats"], "agreement_tolerance": solver["tol"],
+            "n_agree": solver["n_agree"], "transient_windows": solver["transient_windows"],
+            "max_windows": solver["max_windows"],
+            "statistics": "the last window's, once n_agree consecutive windows agree"}
+
+
 def compare_rms(hb_ds, ni_ds, tolerance: float):
     """RMS mesh forces of two methods at the same ``P`` points and ``m`` meshes, compared.
 
@@ -197,44 +291,68 @@ def compare_rms(hb_ds, ni_ds, tolerance: float):
 # ----------------------------------------------------------------- harmonic balance
 
 
+def point_orders(case: GearCase, f_hz, harmonics: int | None = None) -> list:
+    """The orders ``K`` of each point at ``f_hz`` (Hz): an ``int`` from
+    :func:`~gearjax._studies.harmonics.harmonics_rule` for a periodic gear, a tuple from
+    :func:`~gearjax._studies.harmonics.torus_orders_rule` on a torus (``G > 1``), each
+    with the system's response cutoff; ``harmonics``: that K (on every torus angle).
+
+    **Raises:** ``ArgumentError`` (a ``TrainError``) naming ``harmonics`` below the
+    excitation floor, or a K whose factorisation does not fit in memory."""
+    s = case.system
+    if harmonics is not None:
+        _harmonics.require_harmonics(s, harmonics)
+    cutoff = _harmonics.response_cutoff_hz(s)
+    if case.G > 1:
+        ks = [(int(harmonics),) * case.G if harmonics is not None else
+              _harmonics.torus_orders_rule(s, float(w), cutoff_hz=cutoff)
+              for w in case.omega(f_hz)]
+    else:
+        min_k = _harmonics.excitation_floor(s)
+        ks = [int(harmonics) if harmonics is not None else
+              _harmonics.harmonics_rule(f / case.mu_ref, min_k, cutoff_hz=cutoff)
+              for f in np.asarray(f_hz, dtype=float)]
+    for K in dict.fromkeys(ks):
+        _harmonics.require_size(s, K, mu=case.mu)
+    return ks
+
+
 def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
                             follow: bool = False) -> dict:
     """Harmonic-balance solutions of ``case`` at ``f_hz`` (Hz), in the order given.
 
-    ``K`` per point from :func:`~gearjax._studies.harmonics.harmonics_rule` (or ``harmonics``);
-    one batched Newton solve from the linear guess per distinct ``K``, then, with
-    backlash, :func:`~gearjax._studies.sweep.backlash_start` for each point that failed. ``follow``: first
-    start each point from the previous converged one (a sweep).
+    ``K`` per point from :func:`point_orders`; one batched Newton solve from the linear
+    guess per distinct ``K``, then, with backlash,
+    :func:`~gearjax._studies.sweep.backlash_start` for each point that failed (on a torus
+    the homotopy in backlash: no period to settle to). ``follow``: first start each point
+    from the previous converged one (a sweep).
 
-    **Returns:** a dict of per-point arrays: ``X`` ``(P, 2Kmax+1, n)`` (coefficients
-    zero-padded to the largest K), ``harmonics`` ``(P,)``, ``result`` ``(P,)`` words
-    (:func:`~gearjax._engine.results.result_word`), ``stable`` ``(P,)`` bool, and ``responses``
-    (:class:`~gearjax.MeshResponses`, fields ``(P, m)``; NaN where not converged).
+    **Returns:** a dict of per-point arrays: ``harmonics``, ``result`` ``(P,)`` words
+    (:func:`~gearjax._engine.results.result_word`), ``stable`` ``(P,)`` bool (NaN where
+    not converged), ``responses`` (:class:`~gearjax.MeshResponses`, fields ``(P, m)``;
+    NaN where not converged), ``x0``, ``v0`` ``(P, n)``: the state at ``t = 0`` of each
+    solution (rad or m, and per s; :func:`~gearjax.hb_initial_state`, or
+    :func:`torus_initial_state`), and ``X``. Periodic gear: ``X`` ``(P, 2Kmax+1, n)``
+    (coefficients zero-padded to the largest K) and ``harmonics`` ``(P,)``; torus:
+    ``X`` a list of ``(C_p, n)`` (each point's own truncation set) and ``harmonics``
+    ``(P, G)`` orders.
     """
     f_hz = np.asarray(f_hz, dtype=float)
     omegas = case.omega(f_hz)
-    min_k = _harmonics.excitation_floor(case.system)
-    if harmonics is not None:
-        _harmonics.require_harmonics(case.system, harmonics)
-    cutoff = _harmonics.response_cutoff_hz(case.system)
-    ks = np.array([harmonics if harmonics is not None else
-                   _harmonics.harmonics_rule(f / case.mu_ref, min_k, cutoff_hz=cutoff)
-                   for f in f_hz], dtype=int)
-    for K in np.unique(ks):
-        _harmonics.require_size(case.system, int(K), mu=case.mu)
-    P, n, K_max = len(f_hz), case.system.n_dof, int(ks.max())
-    X = np.zeros((P, 2 * K_max + 1, n))
+    ks = point_orders(case, f_hz, harmonics)
+    P, n = len(f_hz), case.system.n_dof
     converged = result_word(RESULTS.successful)
     result = np.full(P, result_word(RESULTS.nonlinear_max_steps_reached), dtype=object)
     stable = np.zeros(P, dtype=bool)
     rows = [None] * P
-    problems = {int(K): _hb.hb_problem(case.system, _hb.HarmonicBalance(n_harmonics=int(K)))
-                for K in np.unique(ks)}
+    problems = {K: _hb.hb_problem(case.system, _harmonics.settings_for(case.system, K))
+                for K in dict.fromkeys(ks)}
+    groups = {K: np.array([i for i in range(P) if ks[i] == K]) for K in problems}
     ys = [None] * P
     if follow:
         previous = None
         for i in range(P):
-            problem = problems[int(ks[i])]
+            problem = problems[ks[i]]
             y, code = None, RESULTS.nonlinear_max_steps_reached
             if previous is not None:
                 sol = newton(problem, jnp.asarray(omegas[i]),
@@ -244,10 +362,10 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
                 y, code = start_point(problem, omegas[i])
             ys[i], result[i] = y, result_word(code)
             if result[i] == converged:
-                previous = (y, int(ks[i]))
+                previous = (y, ks[i])
     else:
         for K, problem in problems.items():
-            idx = np.flatnonzero(ks == K)
+            idx = groups[K]
             sols = solve_points(problem, jnp.asarray(omegas[idx]))
             words = result_word(sols.result)
             for j, i in enumerate(idx):
@@ -255,22 +373,42 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
                 if words[j] != converged and case.has_backlash:
                     sol = backlash_start(problem, omegas[i])
                     ys[i], result[i] = sol.y, result_word(sol.result)
+    torus = case.G > 1
+    X = [None] * P if torus else np.zeros((P, 2 * max(ks) + 1, n))
+    x0, v0 = np.zeros((P, n)), np.zeros((P, n))
     for K, problem in problems.items():
-        idx = np.flatnonzero(ks == K)
+        idx = groups[K]
         Xs = jnp.stack([ys[i] for i in idx]).reshape((-1,) + problem.shape) * problem.x_scale
         post = point_rows(problem, Xs, jnp.asarray(omegas[idx]), result[idx],
                           jnp.asarray(case.F_static))
         for j, i in enumerate(idx):
-            X[i, :problem.shape[0]] = np.asarray(Xs[j])
+            if torus:
+                X[i] = np.asarray(Xs[j])
+                x0[i], v0[i] = torus_initial_state(problem.basis, Xs[j], omegas[i])
+            else:
+                X[i, :problem.shape[0]] = np.asarray(Xs[j])
+                x0[i], v0[i] = td.hb_initial_state(Xs[j], omegas[i])
             stable[i] = bool(post["stable"][j])
             rows[i] = jax.tree.map(lambda a: np.asarray(a[j]), post["responses"])
     responses = jax.tree.map(lambda *a: np.stack(a), *rows)
     result = result.astype(str)
     failed = result != converged
     responses = jax.tree.map(lambda a: np.where(failed[:, None], np.nan, a), responses)
-    return {"X": X, "harmonics": ks, "result": result, "stable": np.where(failed, np.nan,
-                                                                           stable),
-            "responses": responses}
+    return {"X": X, "harmonics": np.array(ks, dtype=int), "result": result,
+            "stable": np.where(failed, np.nan, stable), "responses": responses,
+            "x0": x0, "v0": v0}
+
+
+def torus_initial_state(basis, X, omega):
+    """State at ``t = 0`` of a torus harmonic-balance solution: ``X`` ``(2P+1, n)``, the
+    coefficients on ``basis`` (:class:`~gearjax._engine.aft.Basis`) of ``x(theta)``
+    with ``theta_g = rates_g Omega t``; ``omega``: Omega (rad/s). The torus counterpart
+    of :func:`~gearjax.hb_initial_state`: ``x0 = X_0 + sum_j a_j``, ``v0 = Omega sum_j
+    nu_j b_j`` (``a_j``, ``b_j`` the cosine and sine rows of wave vector ``k_j``, ``nu_j
+    = k_j . rates``). **Returns:** ``(x0, v0)``, ``(n,)`` each (NumPy)."""
+    X = np.asarray(X)
+    nu = _aft.frequency_numbers(basis)[2::2]
+    return X[0] + X[1::2].sum(axis=0), float(omega) * (nu[:, None] * X[2::2]).sum(axis=0)
 
 
 # ------------------------------------------------------------------------------ JSON
@@ -279,8 +417,13 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
 def verify_json(result: VerifyResult) -> dict:
     """interface.md's ``verify`` JSON: ``points``, each with the point fields of a sweep
     (``result`` and ``converged`` of both methods) and per mesh ``rms_hb``, ``rms_ni``,
-    ``rel_diff``, ``ok`` (``reason`` where a value is missing)."""
+    ``rel_diff``, ``ok`` (``reason`` where a value is missing). A quasi-periodic gear
+    adds ``reference`` (:func:`window_reference`) and ``torus``
+    (:func:`~gearjax._gear.case.torus_fields`), and per point ``harmonics`` as the
+    orders per angle, ``period`` null with ``period_reason``, ``windows``, ``window_s``,
+    ``window_change`` and ``agreement`` (:data:`AGREEMENT`) with ``agreement_reason``."""
     hb, ni = result.hb, result.ni
+    torus = result.reference is not None
     names = hb["mesh"].values.tolist()
     stage, side = hb["stage"].values.tolist(), hb["side"].values.tolist()
     planet = hb["planet"].values.tolist()
@@ -314,11 +457,13 @@ def verify_json(result: VerifyResult) -> dict:
             "result_ni": res_ni,
             "stable": None if stable < 0 else bool(stable),
             "period": int(ni["period"].values[k]) or None,  # 0: no repeat found
-            "harmonics": int(hb["harmonics"].values[k]),
+            "harmonics": None if torus else int(hb["harmonics"].values[k]),
             "ok": bool(np.all(result.ok[k])),
             "meshes": meshes,
         })
-    return {
+        if torus:
+            points[-1].update(_torus_point(result, k, conv_hb, res_ni))
+    out = {
         "gear": hb.attrs.get("gear"),
         "reference_stage": hb.attrs.get("reference_stage"),
         "tolerance": result.tolerance,
@@ -329,6 +474,49 @@ def verify_json(result: VerifyResult) -> dict:
         "seconds": result.seconds,
         "points": points,
     }
+    if torus:
+        out["reference"] = result.reference
+        out["torus"] = json.loads(hb.attrs["solver"])["torus"]
+    return out
+
+
+AGREEMENT = {
+    "agree": "both converged and every mesh within the tolerance",
+    "differ": "both converged but a mesh differs by more than the tolerance: the torus "
+              "solution is not what the integration follows (the response locks onto a "
+              "rational winding, turns chaotic, the torus is unstable, or its truncation is "
+              "short)",
+    "not_stationary": "consecutive windows of the integration did not agree: no stationary "
+                      "statistics to compare (a locking or chaotic response, or a transient "
+                      "longer than the windows)",
+    "hb_failed": "the harmonic balance did not converge",
+    "integration_failed": "the integration failed",
+}
+"""The per-point ``agreement`` of a quasi-periodic verification, and what each means."""
+
+
+def _torus_point(result: VerifyResult, k: int, conv_hb: bool, res_ni: str) -> dict:
+    """The fields a quasi-periodic verification adds to point ``k`` of the JSON: the
+    orders per angle, no period (with the reason), the windows, and the
+    ``agreement`` (:data:`AGREEMENT`) with its ``agreement_reason``."""
+    ni = result.ni
+    if not conv_hb:
+        word = "hb_failed"
+    elif res_ni == "not_stationary":
+        word = "not_stationary"
+    elif res_ni != "quasi_periodic":
+        word = "integration_failed"
+    else:
+        word = "agree" if bool(np.all(result.ok[k])) else "differ"
+    return {"harmonics": [int(v) for v in result.hb["harmonics"].values[k]],
+            "period": None,
+            "period_reason": "quasi-periodic: the mesh frequencies fall in incommensurate "
+                             "groups, so the response never repeats; the integration's "
+                             "statistics are over windows",
+            "windows": int(ni["windows"].values[k]),
+            "window_s": _number(ni["window_s"].values[k]),
+            "window_change": _number(ni["window_change"].values[k]),
+            "agreement": word, "agreement_reason": AGREEMENT[word]}
 
 
 def _number(x) -> float | None:

@@ -8,11 +8,13 @@ from collections.abc import Callable
 import jax.numpy as jnp
 import numpy as np
 
-from ..._gear.case import gear_case
+from ..._errors import bad_argument
+from ..._gear.case import gear_case, torus_fields
 from ..._gear.toml_io import dumps_train
 from ..._gear.train import Train
 from .. import concurrency
 from .. import harmonics as _harmonics
+from . import completion as _completion
 from . import segments as _segments
 from . import speculation as _speculation
 from . import walk as _walk
@@ -45,6 +47,8 @@ def sweep(
     journal=None,
     resume: bool = False,
     command: str | None = None,
+    complete: bool = True,
+    seeds: int = 0,
 ) -> SweepResult:
     """Frequency response of ``gear`` from ``from_hz`` to ``to_hz`` (reference-stage mesh Hz).
 
@@ -62,6 +66,14 @@ def sweep(
     argument only where ``progress`` takes one (:func:`.progress.with_branches`);
     ``command``: how the sweep was asked for, kept
     as the dataset's ``command`` attribute (default: empty).
+
+    ``complete`` (non-linear sweeps): after the walk, look for the stable states it did
+    not trace and trace their branches (:mod:`~gearjax._studies.sweep.completion`): the
+    start at the band's far end, and the orbit a rig settles to where each stable
+    stretch ends (a jump up or down); ``seeds``: also the end states of an up and a down
+    time-integration sweep over that many even frequencies (0: none; each costs a few
+    tens of periods of integration per direction). Every branch is numbered
+    (``branch``) and the dataset attribute ``branches`` says how each was found.
 
     ``journal``: a file (e.g. ``RESULTS.nc.journal``, :func:`gearjax._io.journal.journal_path`)
     where every finished point (continuation) or segment (linear grid) is appended as it
@@ -98,17 +110,25 @@ def sweep(
     """
     t_start = time.perf_counter()
     check_arguments(from_hz, to_hz, eta=eta, smoothing=smoothing, harmonics=harmonics,
-                    max_step_hz=max_step_hz, points=points, max_points=max_points)
-    case = gear_case(train, gear, stage, linear)
+                    max_step_hz=max_step_hz, points=points, max_points=max_points,
+                    seeds=seeds)
+    complete = bool(complete) and not linear
+    case = gear_case(train, gear, stage, linear, torus=True)
     system = case.system
+    if case.G > 1:
+        if eta != 1:
+            raise bad_argument("eta", eta, f"the gear's mesh frequencies fall in {case.G} "
+                               "incommensurate groups: its response is quasi-periodic, and "
+                               "sub-harmonic (eta > 1) solutions are periodic ones")
+        complete = False  # the completion's seeds are periodic orbits (G = 1 only)
     min_k = _harmonics.excitation_floor(system, eta)
     if harmonics is not None:
         _harmonics.require_harmonics(system, harmonics, eta)
     cutoff_hz = _harmonics.response_cutoff_hz(system)
     segments = _segments.band_segments(from_hz, to_hz, case.mu_ref, min_k, eta, harmonics,
-                                       cutoff_hz)
+                                       cutoff_hz, system)
     for K in sorted({k for *_, k in segments}):
-        _harmonics.require_size(system, K, mu=case.mu)
+        _harmonics.require_size(system, K, mu=case.mu, value=harmonics)
     F_static = jnp.asarray(case.F_static)
     runaway = _walk.RUNAWAY * (np.abs(np.asarray(F_static)) / np.asarray(system.kbar)
                                + np.asarray(system.backlash))  # RMS mesh deflection limit (m)
@@ -116,7 +136,7 @@ def sweep(
     run = run_fields(train_toml, gear=case.gear.name, stage=case.stage, from_hz=from_hz,
                      to_hz=to_hz, linear=linear, harmonics=harmonics, eta=eta,
                      max_step_hz=max_step_hz, smoothing=smoothing, points=points,
-                     max_points=max_points)
+                     max_points=max_points, complete=complete, seeds=seeds)
     log = SweepLog.open(journal, run, resume)
     ctx = Context(system=system, eta=eta, smoothing=smoothing, from_hz=from_hz,
                   to_hz=to_hz, mu_ref=case.mu_ref, max_step_hz=max_step_hz,
@@ -128,32 +148,44 @@ def sweep(
         log.close()
         raise
     solver = {"method": "harmonic balance", "linear": linear, "eta": eta,
-              "segments": [list(s) for s in segments], "reference_stage": case.stage,
+              "segments": [[a, b, _segments.orders_json(K)] for a, b, K in segments],
+              "reference_stage": case.stage,
               "max_step_hz": max_step_hz, "cutoff_hz": cutoff_hz,
               "truncation": truncation, "truncation_target": _harmonics.TRUNCATION_TARGET,
-              "smoothing": smoothing}
+              "smoothing": smoothing, "torus": torus_fields(case)}
     walk = _walk.Walk(segments=list(segments))
     post = PostStream(F_static)
-    _run_walk(ctx, walk, log, post, linear=linear, points=points,
-              progress=with_branches(progress), F_static=F_static)
+    pieces, branches = _run_walk(ctx, walk, log, post, linear=linear, points=points,
+                                 progress=with_branches(progress), F_static=F_static,
+                                 complete=complete, seeds=seeds)
     if linear:
         solver["refinement"] = {"tolerance": LINEAR_TOLERANCE, "checked": walk.checked,
                                 "added": walk.added}
-    data = point_data(walk, log, post, ctx, F_static, linear=linear)
+    if complete:
+        solver["completion"] = {"seeds": int(seeds), "jump_multiplier":
+                                _completion.JUMP_MULTIPLIER, "max_branches":
+                                _completion.MAX_BRANCHES}
+    data = point_data(walk, log, post, ctx, F_static, linear=linear, pieces=pieces)
+    folds = list(walk.folds) + [p["fold_lam"] * ctx.from_hz for piece in (pieces or [])
+                                if not isinstance(piece.key, int)
+                                for p in piece.pts if p["fold"]]
     ds = sweep_result_dataset(data, case, F_static=F_static, train_toml=train_toml,
-                              solver=solver, folds=walk.folds, stop=walk.stop,
+                              solver=solver, folds=folds, stop=walk.stop,
                               restarts=walk.restarts,
-                              command="" if command is None else command)
-    return SweepResult(dataset=ds, folds_hz=tuple(walk.folds), stop=walk.stop,
+                              command="" if command is None else command,
+                              branches=branches)
+    return SweepResult(dataset=ds, folds_hz=tuple(folds), stop=walk.stop,
                        segments=tuple(walk.segments), seconds=time.perf_counter() - t_start,
-                       restarts=tuple(walk.restarts))
+                       restarts=tuple(walk.restarts), branches=tuple(branches or ()))
 
 
 def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress,
-              F_static) -> None:
+              F_static, complete: bool = False, seeds: int = 0):
     """Walk every segment (a linear grid, or the continuations with the last segment
-    speculated); the journal is closed after, and the post-processing stopped where the
-    walk is interrupted. BLAS keeps a core for the post-processing while a continuation
+    speculated), then, where ``complete``, the branches the walk missed
+    (:func:`~gearjax._studies.sweep.completion.complete`); the journal is closed after,
+    and the post-processing stopped where the walk is interrupted. **Returns:**
+    ``(pieces, branch records)`` of the completion, ``(None, None)`` without it. BLAS keeps a core for the post-processing while a continuation
     runs (:func:`gearjax._studies.concurrency.limit_blas`)."""
     last = walk.segments[-1]
     blas = None if linear else concurrency.limit_blas()  # a linear sweep's post comes after
@@ -166,6 +198,13 @@ def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress,
             if not _walk.walk_segment(ctx, walk, log, post, progress=progress,
                                       entered=entered):
                 break
+        if spec is not None:
+            spec.cancel()
+            spec = None
+        if complete and walk.problems:
+            return _completion.complete(ctx, walk, log, post, F_static, seeds=seeds,
+                                        progress=progress)
+        return None, None
     except BaseException:
         post.close()
         raise

@@ -9,12 +9,12 @@ from ..._errors import bad_argument
 
 
 def check_arguments(from_hz, to_hz, *, eta, smoothing, harmonics, max_step_hz, points,
-                    max_points) -> None:
+                    max_points, seeds=0) -> None:
     """Refuse arguments of :func:`gearjax._studies.sweep.sweep` that cannot describe a
     sweep.
 
     **Raises:** ``ArgumentError`` naming the argument (``from_hz``, ``to_hz``, ``eta``,
-    ``smoothing``, ``harmonics``, ``max_step_hz``, ``points``, ``max_points``)."""
+    ``smoothing``, ``harmonics``, ``max_step_hz``, ``points``, ``max_points``, ``seeds``)."""
     def integer(value) -> bool:
         return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
@@ -41,3 +41,6 @@ def check_arguments(from_hz, to_hz, *, eta, smoothing, harmonics, max_step_hz, p
         raise bad_argument("points", points, "must be an integer >= 2")
     if not integer(max_points) or max_points < 2:
         raise bad_argument("max_points", max_points, "must be an integer >= 2")
+    if not integer(seeds) or seeds < 0 or seeds == 1:
+        raise bad_argument("seeds", seeds, "must be 0 (no integration seeds) or an integer "
+                           ">= 2 (frequencies of the up and down integration sweeps)")

@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from ..._engine import hb as _hb
+from .. import harmonics as _harmonics
 
 
 @dataclasses.dataclass(frozen=True)
@@ -32,11 +33,12 @@ class Context:
     problems: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)
 
     def problem(self, K: int) -> _hb.HBProblem:
-        """The harmonic-balance problem with ``K`` harmonics (the same object for every
-        segment of that K, in any thread)."""
+        """The harmonic-balance problem with ``K`` harmonics (orders per angle on a
+        torus; the same object for every segment of that K, in any thread)."""
+        K = _harmonics.as_orders(K)
         if K not in self.problems:
-            self.problems[K] = _hb.hb_problem(self.system, _hb.HarmonicBalance(
-                n_harmonics=K, eta=self.eta, smoothing=self.smoothing))
+            self.problems[K] = _hb.hb_problem(self.system, _harmonics.settings_for(
+                self.system, K, eta=self.eta, smoothing=self.smoothing))
         return self.problems[K]
 
     def omega(self, f_hz: float) -> float:

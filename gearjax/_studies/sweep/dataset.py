@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import jax
@@ -10,21 +11,29 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._engine.results import legacy_words
-from ..._io.results import add_displacement_harmonics, mesh_coordinates, sweep_dataset
+from ..._io.results import (add_displacement_harmonics, add_displacement_waves,
+                               mesh_coordinates, sweep_dataset)
+from .. import harmonics as _harmonics
+from .completion import piece_rows
 from .post import bifurcations, point_rows
 
 
-def point_data(walk, log, post, ctx, F_static, *, linear: bool) -> dict:
+def point_data(walk, log, post, ctx, F_static, *, linear: bool, pieces=None) -> dict:
     """Per-point arrays of the walk's segments, in sweep order: ``responses``,
     ``omega``, ``result``, ``X`` (list: K differs between segments), ``K``, ``stable``,
     ``max_multiplier``, ``multipliers``, ``excluded``, ``branch``. A segment continued by
     the next ends with a point past the boundary, which the next one starts on (or,
-    where it could not, from that point): that point is left out.
+    where it could not, from that point): that point is left out. ``pieces``: the
+    branches of a completed sweep (:func:`~gearjax._studies.sweep.completion.complete`,
+    rows computed), taken instead of the walk's segments.
 
     **Raises:** ``RuntimeError`` where the sweep found no point."""
     rows: list[dict] = []
     branch = 0
     problems, fresh = walk.problems, walk.fresh
+    if pieces is not None:
+        rows = [piece_rows(p) for p in pieces]
+        problems = []
     for j, problem in enumerate(problems):
         if linear:
             batch = log.batch(j)
@@ -53,19 +62,23 @@ def point_data(walk, log, post, ctx, F_static, *, linear: bool) -> dict:
 
 
 def sweep_result_dataset(data: dict, case, *, F_static, train_toml: str, solver: dict,
-                         folds: list, stop: str, restarts: list, command: str):
+                         folds: list, stop: str, restarts: list, command: str,
+                         branches: list | None = None):
     """The results Dataset of the sweep points ``data`` (:func:`point_data`) of the
     gear ``case`` (:class:`gearjax._gear.case.GearCase`) with static mesh forces
     ``F_static`` ``(m,)`` (N): frequencies from the base frequencies ``omega``,
     bifurcations along each branch, the ``solver`` settings, and the attributes
     ``kind = "sweep"``, ``folds_hz``, ``stop``, ``reference_stage``, ``bifurcations``,
-    ``restarts`` and ``command`` (how the sweep was asked for)."""
+    ``restarts`` and ``command`` (how the sweep was asked for); with ``branches`` (a
+    completed sweep's records, :func:`~gearjax._studies.sweep.completion.complete`) the
+    attribute ``branches`` (JSON: per branch ``branch``, ``found``, ``seed_hz``,
+    ``stops``) and the point variable ``found`` (how the point's branch was found)."""
     omegas = data["omega"]
     f_ref = omegas * case.mu_ref / (2 * math.pi)
     stage_hz = np.outer(omegas / (2 * math.pi), np.asarray(case.mu, float))
-    bif = bifurcations(f_ref, data["stable"], data["multipliers"], data["excluded"],
-                       data["branch"])
     system = case.system
+    bif = bifurcations(f_ref, data["stable"], data["multipliers"], data["excluded"],
+                       data["branch"], torus=system.n_angles > 1)
     ds = sweep_dataset(
         data["responses"], **mesh_coordinates(system),
         mesh_frequency_hz=f_ref,
@@ -84,6 +97,24 @@ def sweep_result_dataset(data: dict, case, *, F_static, train_toml: str, solver:
     )
     ds["branch"] = ("point", data["branch"], {
         "units": "1", "long_name": "solution branch (a new one after each restart)"})
+    eta = data.get("eta", np.full(len(omegas), solver.get("eta", 1)))
+    ds["eta"] = ("point", np.asarray(eta, dtype=np.int64), {
+        "units": "1", "long_name": "period of the solution in base periods 2 pi / Omega (2: "
+                                   "a branch born at a period doubling); its harmonics are "
+                                   "of Omega / eta"})
+    if branches is not None:
+        ds.attrs["branches"] = json.dumps(branches)
+        how = {b["branch"]: b["found"] for b in branches}
+        ds["found"] = ("point", np.array([how.get(int(b), "") for b in data["branch"]],
+                                         dtype=str),
+                       {"units": "1",
+                        "long_name": "how the point's branch was found: sweep, restart, far "
+                                     "end, jump up, jump down, integration up or down, "
+                                     "period doubling"})
     ds["max_multiplier"] = ("point", data["max_multiplier"], {
         "units": "1", "long_name": "largest Floquet multiplier modulus (rigid-body excluded)"})
+    if system.n_angles > 1:
+        waves = [_harmonics.torus_basis_of(system, K).orders for K in map(tuple, data["K"])]
+        return add_displacement_waves(ds, data["X"], system.dof_labels, data["K"], waves,
+                                      system.angle_ratio)
     return add_displacement_harmonics(ds, data["X"], system.dof_labels, data["K"])

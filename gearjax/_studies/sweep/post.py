@@ -72,7 +72,7 @@ def point_rows(problem, Xs, omegas, results, F_static, done=()):
     parts += concurrency.map_in_threads(chunk, starts, POST_THREAD)
     resp, stab = jax.tree.map(lambda *a: np.concatenate(a)[:P], *parts)
     return {"responses": resp, "omega": np.asarray(omegas), "result": np.asarray(results),
-            "X": list(np.asarray(Xs[:P])), "K": np.full(P, problem.settings.n_harmonics),
+            "X": list(np.asarray(Xs[:P])), "K": _orders_rows(problem, P),
             "stable": np.asarray(stab.stable), "max_multiplier": np.asarray(stab.max_abs),
             "multipliers": np.asarray(stab.multipliers), "excluded": np.asarray(stab.excluded)}
 
@@ -138,6 +138,15 @@ class PostStream:
         self._worker.close()
 
 
+def _orders_rows(problem, P: int) -> np.ndarray:
+    """Each point's ``K``: ``(P,)`` for a periodic problem, ``(P, G)`` orders on a torus."""
+    K = problem.settings.n_harmonics
+    if problem.basis.G == 1:
+        return np.full(P, int(K if not isinstance(K, tuple) else K[0]))
+    return np.tile(np.asarray(problem.basis.G * (K,) if isinstance(K, int) else K,
+                              dtype=np.int64)[None], (P, 1))
+
+
 def point_arrays(problem, omega_ref: float, pts: list[dict]):
     """Unscaled solutions ``(P, C, n)`` and base frequencies ``(P,)`` (rad/s) of journal
     point records (``y``, ``lam``)."""
@@ -146,7 +155,8 @@ def point_arrays(problem, omega_ref: float, pts: list[dict]):
     return Xs, jnp.asarray(np.array([p["lam"] for p in pts]) * omega_ref)
 
 
-def bifurcations(f_hz, stable, multipliers, excluded, branch=None) -> list[dict]:
+def bifurcations(f_hz, stable, multipliers, excluded, branch=None, torus: bool = False
+                 ) -> list[dict]:
     """Where stability changes between neighbouring points of one branch, and how
     (interface: a list of ``{"mesh_frequency_hz", "kind"}``, the frequency the midpoint
     of the two points).
@@ -154,14 +164,17 @@ def bifurcations(f_hz, stable, multipliers, excluded, branch=None) -> list[dict]
     ``kind`` is from :func:`~gearjax._engine.verdict.bifurcation_kind`: ``fold``,
     ``period_doubling`` or ``neimark_sacker`` (``None`` where no retained multiplier
     changed side of the unit circle; the rigid-body multipliers are left out, see
-    :class:`~gearjax._engine.verdict.Stability`).
+    :class:`~gearjax._engine.verdict.Stability`). On a ``torus`` the multipliers are
+    growths per turn of the base angle whose phases mean nothing (``verdict``): the kind
+    is ``None`` (a stability change) there.
     """
     out = []
     change = np.asarray(stable[1:]) != np.asarray(stable[:-1])
     if branch is not None:
         change &= np.asarray(branch[1:]) == np.asarray(branch[:-1])
     for i in np.flatnonzero(change):
-        kind = bifurcation_kind(multipliers[i][~excluded[i]], multipliers[i + 1][~excluded[i + 1]])
+        kind = None if torus else bifurcation_kind(multipliers[i][~excluded[i]],
+                                                   multipliers[i + 1][~excluded[i + 1]])
         out.append({"mesh_frequency_hz": float((f_hz[i] + f_hz[i + 1]) / 2), "kind": kind})
     return out
 

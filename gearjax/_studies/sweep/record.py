@@ -15,14 +15,19 @@ import sys
 
 from ..._errors import bad_argument, fail
 from ..._io import journal as _journal
+from ..harmonics import as_orders, orders_text
 
 
 def run_fields(train_toml: str, *, gear: str, stage: str, from_hz, to_hz, linear: bool,
                harmonics, eta: int, max_step_hz, smoothing, points: int,
-               max_points: int) -> dict:
+               max_points: int, complete: bool = True, seeds: int = 0) -> dict:
     """The fields of a sweep's journal header: everything its results depend on. The keys
     are those of version-1 journals (the command line's words for the arguments), so
-    journals written before still resume; a refusal names the key that differs."""
+    journals written before still resume; a refusal names the key that differs. The
+    completion's fields (:mod:`~gearjax._studies.sweep.completion`) are there only where
+    they differ from the default: ``--no-complete`` where a non-linear sweep is not
+    completed, ``--seeds`` where it has integration seeds (a journal written before the
+    completion existed holds the walk, which a completed run begins with)."""
     run = {"train": train_toml, "--gear": gear, "--stage": stage,
            "--from": float(from_hz), "--to": float(to_hz), "--linear": bool(linear),
            "--harmonics": None if harmonics is None else int(harmonics), "--eta": int(eta),
@@ -32,6 +37,10 @@ def run_fields(train_toml: str, *, gear: str, stage: str, from_hz, to_hz, linear
         run["--points"] = int(points)
     else:
         run["--max-points"] = int(max_points)
+        if not complete:
+            run["--no-complete"] = True
+        if complete and seeds:
+            run["--seeds"] = int(seeds)
     return run
 
 
@@ -114,11 +123,11 @@ class SweepLog:
         before any of its records is replayed."""
         recs = self.points(j)[:1] + [r for r in [self.batch(j)] if r is not None]
         for rec in recs:
-            if int(rec["K"]) != int(K):
+            if as_orders(rec["K"]) != as_orders(K):
                 where = self._writer.path if self._writer else "journal"
-                raise fail(str(where), f"segment {j} K", int(rec["K"]),
-                           f"this run's truncation check chose K = {K} for that segment: "
-                           "delete the journal to start afresh")
+                raise fail(str(where), f"segment {j} K", orders_text(rec["K"]),
+                           f"this run's truncation check chose K = {orders_text(K)} for "
+                           "that segment: delete the journal to start afresh")
 
     def close(self) -> None:
         """Close the journal (and give its lock back)."""

@@ -16,24 +16,32 @@ from .. import harmonics as _harmonics
 from .starts import newton
 
 
-def band_segments(from_hz, to_hz, mu_ref, min_k, eta, fixed, cutoff_hz):
+def band_segments(from_hz, to_hz, mu_ref, min_k, eta, fixed, cutoff_hz, system=None):
     """``(f_a, f_b, K)`` in sweep order (Hz, reference stage); K constant on each:
     ``fixed``, else the first choice of :func:`gearjax._studies.harmonics.harmonics_rule`
     at response base frequencies ``f / mu_ref / eta`` with the system's ``cutoff_hz``,
-    never below ``min_k``."""
+    never below ``min_k``. For a ``system`` on a torus (``G > 1``) ``K`` is a tuple of
+    orders: ``fixed`` on every angle, else
+    :func:`gearjax._studies.harmonics.torus_orders_rule` at the lower end of each piece
+    of the band (the orders fall as the frequency rises)."""
+    torus = system is not None and system.n_angles > 1
     if fixed is not None:
-        return [(from_hz, to_hz, int(fixed))]
+        return [(from_hz, to_hz, (int(fixed),) * system.n_angles if torus else int(fixed))]
     lo, hi = sorted((from_hz, to_hz))
     edges = np.geomspace(lo, hi, 65)
-    ks = [_harmonics.harmonics_rule(f / mu_ref / eta, min_k, eta, cutoff_hz=cutoff_hz)
-          for f in edges[:-1]]
+    if torus:
+        ks = [_harmonics.torus_orders_rule(system, 2 * math.pi * f / mu_ref,
+                                           cutoff_hz=cutoff_hz) for f in edges[:-1]]
+    else:
+        ks = [_harmonics.harmonics_rule(f / mu_ref / eta, min_k, eta, cutoff_hz=cutoff_hz)
+              for f in edges[:-1]]
     segs = []
     for f_a, f_b, k in zip(edges[:-1], edges[1:], ks):
         if segs and segs[-1][2] == k:
             segs[-1] = (segs[-1][0], f_b, k)
         else:
             segs.append((f_a, f_b, k))
-    segs = [(float(a), float(b), k) for a, b, k in segs]
+    segs = [(float(a), float(b), _harmonics.as_orders(k)) for a, b, k in segs]
     if from_hz > to_hz:
         segs = [(b, a, k) for a, b, k in reversed(segs)]
     segs[0] = (float(from_hz), segs[0][1], segs[0][2])
@@ -50,52 +58,72 @@ def checked_segments(ctx, segments, F_static, *, fixed: bool):
     (:func:`gearjax._studies.harmonics.truncation_change`); where the relative change of a
     mesh's RMS force exceeds ``TRUNCATION_TARGET`` K doubles (while the check at twice
     it is affordable, :func:`gearjax._studies.harmonics.check_affordable`) and the check
-    repeats. A ``fixed`` K (the caller's ``harmonics``) is checked, warned about
-    (``TruncationWarning``) and kept. A resumed run checks again (the same decisions on
-    the same machine); a journal segment solved with another K is refused where the walk
-    reaches it (:meth:`gearjax._studies.sweep.record.SweepLog.require_K`)."""
+    repeats. On a torus each angle is checked on its own (its order doubled, the others
+    kept, :func:`gearjax._studies.harmonics.widened`: one estimate per angle), and only
+    the angles whose estimate exceeds the target double. A ``fixed`` K (the caller's
+    ``harmonics``) is checked, warned about (``TruncationWarning``) and kept. A resumed
+    run checks again (the same decisions on the same machine); a journal segment solved
+    with another K is refused where the walk reaches it
+    (:meth:`gearjax._studies.sweep.record.SweepLog.require_K`)."""
     target = _harmonics.TRUNCATION_TARGET
     out, estimates = [], []
     for f_a, f_b, K in segments:
+        angles = range(len(K)) if isinstance(K, tuple) else (0,)
         while True:
-            skip = _harmonics.check_affordable(ctx.system, K)
-            if skip is not None:
-                estimates.append({"from_hz": float(f_a), "K": int(K), "K_check": None,
-                                  "change": None, "skipped": skip})
-                warnings.warn(_harmonics.TruncationWarning(
-                    f"sweep: segment from {f_a:.1f} Hz with K = {K}: truncation not "
-                    f"checked ({skip})"))
+            grow = []
+            for g in angles:
+                K2 = _harmonics.widened(K, g)
+                where = f" (angle {g})" if isinstance(K, tuple) else ""
+                skip = _harmonics.check_affordable(ctx.system, K, g)
+                if skip is not None:
+                    estimates.append({"from_hz": float(f_a), "K": orders_json(K),
+                                      "K_check": None, "change": None, "skipped": skip})
+                    warnings.warn(_harmonics.TruncationWarning(
+                        f"sweep: segment from {f_a:.1f} Hz with K = "
+                        f"{_harmonics.orders_text(K)}: truncation{where} not checked ({skip})"))
+                    continue
+                change, backlash = truncation_at(ctx, K, f_a, F_static, K2)
+                estimates.append({"from_hz": float(f_a), "K": orders_json(K),
+                                  "K_check": orders_json(K2),
+                                  "change": None if not math.isfinite(change) else change,
+                                  "backlash": backlash})
+                if not math.isfinite(change):
+                    warnings.warn(_harmonics.TruncationWarning(
+                        f"sweep: segment from {f_a:.1f} Hz with K = "
+                        f"{_harmonics.orders_text(K)}: truncation{where} not checked (no "
+                        f"converged point there with K = {_harmonics.orders_text(K)} and "
+                        f"{_harmonics.orders_text(K2)})"))
+                    continue
+                if fixed and change > target:
+                    warnings.warn(_harmonics.TruncationWarning(
+                        f"sweep: segment from {f_a:.1f} Hz with K = "
+                        f"{_harmonics.orders_text(K)}: truncation estimate{where} "
+                        f"{change:.2%} (RMS mesh force change against K = "
+                        f"{_harmonics.orders_text(K2)}; target {target:.1%}): omit "
+                        "`harmonics` to let the sweep choose K"))
+                if change > target and not fixed:
+                    grow.append(g)
+            if not grow:
                 break
-            K2 = 2 * K
-            change, backlash = truncation_at(ctx, K, f_a, F_static)
-            estimates.append({"from_hz": float(f_a), "K": int(K), "K_check": int(K2),
-                              "change": None if not math.isfinite(change) else change,
-                              "backlash": backlash})
-            if not math.isfinite(change):
-                warnings.warn(_harmonics.TruncationWarning(
-                    f"sweep: segment from {f_a:.1f} Hz with K = {K}: truncation not checked "
-                    f"(no converged point there with K = {K} and {K2})"))
-                break
-            if fixed and change > target:
-                warnings.warn(_harmonics.TruncationWarning(
-                    f"sweep: segment from {f_a:.1f} Hz with K = {K}: truncation estimate "
-                    f"{change:.2%} (RMS mesh force change against K = {K2}; target "
-                    f"{target:.1%}): omit `harmonics` to let the sweep choose K"))
-            if change <= target or fixed:
-                break
-            K = K2  # affordable: the check above solved it
-        out.append((f_a, f_b, int(K)))
+            for g in grow:  # affordable: the check above solved it
+                K = _harmonics.widened(K, g)
+        out.append((f_a, f_b, K))
     return out, estimates
 
 
-def truncation_at(ctx, K: int, f_hz, F_static) -> tuple[float, bool]:
+def orders_json(K):
+    """``K`` for JSON: an int, or a list of orders."""
+    return list(K) if isinstance(K, tuple) else int(K)
+
+
+def truncation_at(ctx, K, f_hz, F_static, K2=None) -> tuple[float, bool]:
     """``(change, with backlash)``: the truncation estimate of the point at ``f_hz`` (Hz)
-    with K against 2K (the sweep's problems of those K), Newton from the linear guess;
-    where that fails with backlash (tooth separation far from contact), of the system
-    without backlash (the check then judges the time-varying stiffness only, and says
-    so: ``False``)."""
+    with K against ``K2`` (default 2K; the sweep's problems of those K), Newton from the
+    linear guess; where that fails with backlash (tooth separation far from contact), of
+    the system without backlash (the check then judges the time-varying stiffness only,
+    and says so: ``False``)."""
     omega = ctx.omega(f_hz)
-    problem, wide = ctx.problem(K), ctx.problem(2 * K)
+    problem, wide = ctx.problem(K), ctx.problem(_harmonics.widened(K, 0) if K2 is None else K2)
     sol = newton(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
     if not bool(sol.converged) and problem.system.has_backlash:
         lin = dataclasses.replace(problem.system,

@@ -4,6 +4,8 @@ solved from scratch."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -100,7 +102,10 @@ def settled_start(problem, omega, state=None) -> _hb.HBSolution:
     v0)`` or the static contact state (``time_domain.simulate``: Dopri8 at
     :data:`SETTLE_RTOL`, at most :data:`SETTLE_PERIODS` base periods; the last ``eta``
     periods give the harmonics). A solver failure is returned as a
-    ``nonlinear_max_steps_reached`` solution at the linear guess."""
+    ``nonlinear_max_steps_reached`` solution at the linear guess, and so is every start
+    of a torus problem (``G > 1``: a quasi-periodic response settles to no period)."""
+    if problem.basis.G > 1:  # no period to settle to: the caller goes on without
+        return _failed(problem, omega)
     K, eta = problem.settings.n_harmonics, problem.settings.eta
     settings = _time_domain.TimeDomain(
         rtol=SETTLE_RTOL, atol=SETTLE_RTOL, periodic_tol=100 * SETTLE_RTOL,
@@ -111,13 +116,19 @@ def settled_start(problem, omega, state=None) -> _hb.HBSolution:
     X = _aft.analysis(tr.x.T, K)
     y = (X / problem.x_scale).reshape(-1)
     if not bool(tr.integrated) or not bool(jnp.all(jnp.isfinite(y))):
-        y = _hb.linear_guess(problem, omega)
-        return _hb.HBSolution(X=y.reshape(problem.shape) * problem.x_scale, y=y,
-                              omega=jnp.asarray(omega, float),
-                              result=RESULTS.nonlinear_max_steps_reached,
-                              stats={"num_steps": jnp.asarray(0),
-                                     "residual_norm": jnp.asarray(jnp.inf)})
+        return _failed(problem, omega)
     return newton(problem, jnp.asarray(omega), y)
+
+
+def _failed(problem, omega) -> _hb.HBSolution:
+    """A start that found nothing: a ``nonlinear_max_steps_reached`` solution at the
+    linear guess."""
+    y = _hb.linear_guess(problem, omega)
+    return _hb.HBSolution(X=y.reshape(problem.shape) * problem.x_scale, y=y,
+                          omega=jnp.asarray(omega, float),
+                          result=RESULTS.nonlinear_max_steps_reached,
+                          stats={"num_steps": jnp.asarray(0),
+                                 "residual_norm": jnp.asarray(jnp.inf)})
 
 
 def backlash_homotopy(problem, omega) -> _hb.HBSolution:
@@ -132,14 +143,16 @@ def backlash_homotopy(problem, omega) -> _hb.HBSolution:
     return newton(problem, jnp.asarray(omega), jnp.asarray(branch.y[-1]))
 
 
-def resize_harmonics(y, K_old: int, problem):
-    """Scaled unknowns of ``K_old`` harmonics padded with zeros or truncated to
-    ``problem``'s K (flat)."""
-    C, n = problem.shape
-    old = np.asarray(y).reshape(2 * K_old + 1, n)
-    new = np.zeros((C, n))
-    rows = min(C, old.shape[0])
-    new[:rows] = old[:rows]
+def resize_harmonics(y, K_old, problem):
+    """Scaled unknowns of ``K_old`` harmonics (orders of each angle on a torus) padded
+    with zeros or truncated to ``problem``'s basis (flat; :func:`gearjax._engine.aft.resize`
+    by wave vector)."""
+    n = problem.shape[1]
+    if K_old == problem.settings.n_harmonics:
+        return jnp.asarray(np.asarray(y).reshape(-1))
+    old = _hb.harmonic_basis(problem.system, dataclasses.replace(
+        problem.settings, n_harmonics=K_old, n_time=None))
+    new = _aft.resize(old, problem.basis, np.asarray(y).reshape(old.n_coefficients, n))
     return jnp.asarray(new.reshape(-1))
 
 

@@ -195,14 +195,17 @@ def walk_segment(ctx, walk, log, post, *, progress=None, entered=None, key=None,
 
 def continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap, f_a,
                      progress, max_detour=MAX_DETOUR, guess=None, runaway=None, found=None,
-                     entered=None):
+                     entered=None, meets=None):
     """Continue segment ``j`` from ``lam_a`` to ``lam_b`` (at most ``cap`` points), or the
     rest of it after the points ``log`` holds; every point goes to ``log``. The resumed
     state is the saved point with its tangent and step, and the factors of its bordered
     Jacobian rebuilt as the continuation built them (last row: the tangent before), so
     the points that follow are those of an uninterrupted run. ``found()`` is called after
     each new point went to ``log``; ``entered``: the start ``(y, result, lambda)``
-    where it was found already (``starts.enter_segment`` otherwise). **Returns:** why the
+    where it was found already (``starts.enter_segment`` otherwise); ``meets(y, lambda,
+    chord)``: whether a point (after the first) lies on a branch traced before, ``chord``
+    the step that reached it (the segment then stops as ``closed_loop``,
+    :mod:`~gearjax._studies.sweep.completion`). **Returns:** why the
     segment stopped: the word (:func:`~gearjax._engine.results.result_word`) of a
     ``RESULTS`` item; ``no_converged_start`` is written "no converged start at F Hz
     (why)"."""
@@ -226,6 +229,8 @@ def continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap,
 
     for p in have:
         detoured = detour(p["lam"])
+    if have:
+        front["z"] = np.append(have[-1]["y"], have[-1]["lam"])
 
     def on_point(i, state):
         if i == 0 and have:
@@ -246,6 +251,11 @@ def continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap,
             if trace.revisits(z, t):
                 raise ClosedLoop
             trace.add(z, t)
+        z = np.append(y, lam)
+        if meets is not None and front.get("z") is not None and (lam - lam_b) * direction < 0 \
+                and meets(y, lam, float(np.linalg.norm(z - front["z"]))):
+            return RESULTS.closed_loop
+        front["z"] = z
         if runaway is not None and ran_away(param.problem, y, runaway):
             return RESULTS.runaway
         return RESULTS.detour if detour(lam) and (lam - lam_b) * direction < 0 else None
@@ -263,6 +273,10 @@ def continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap,
         return result_word(RESULTS.reached_end)
     if trace is not None and trace.closed:
         return result_word(RESULTS.closed_loop)
+    if meets is not None and len(have) > 1:
+        z, z0 = (np.append(p["y"], p["lam"]) for p in (last, have[-2]))
+        if meets(last["y"], last["lam"], float(np.linalg.norm(z - z0))):
+            return result_word(RESULTS.closed_loop)
     if runaway is not None and ran_away(param.problem, last["y"], runaway):
         return result_word(RESULTS.runaway)
     if detoured:

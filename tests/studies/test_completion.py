@@ -1,0 +1,139 @@
+"""A completed sweep (issue 29, item 1): every stable state an up or down rig finds.
+
+The clearance oscillator ``x'' + 0.1 x' + g(x) = 0.1 + 0.03 cos(w t)`` (gap 1) has a
+hysteresis band between folds near 0.6365 and 0.852 rad/s: a low contact state (linear,
+exact) and a high impacting one. The walk is made to leave its branch right after the
+first fold (``max_detour`` 5), as it does where a gear's branch wanders, so that it
+misses one of the two stable states; the completion must find it, whichever end the
+sweep starts from. References: the exact linear response and a SciPy integration.
+"""
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.integrate
+
+import gearjax as gj
+from gearjax._engine import aft as _aft
+from gearjax._engine.responses import static_mesh_forces
+from gearjax._studies.sweep import api as _api
+from gearjax._studies.sweep import completion as _completion
+from gearjax._studies.sweep import summary as _summary
+from gearjax._studies.sweep import walk as _walk
+from gearjax._studies.sweep.context import Context
+from gearjax._studies.sweep.dataset import point_data
+from gearjax._studies.sweep.post import PostStream
+from gearjax._studies.sweep.record import SweepLog
+
+K = 15
+W = 0.75  # rad/s, inside the hysteresis band
+
+
+def oscillator():
+    return gj.system_from_matrices([[1.0]], [[0.1]], [[0.0]], [[1.0]], [1.0], backlash=[1.0],
+                                   f_mean=[0.1], f_cos=[[0.03]], f_sin=[[0.0]],
+                                   forcing_mu=[1])
+
+
+def hz(omega):
+    return omega / (2 * math.pi)  # mu_ref = 1: the "mesh frequency" is the base one
+
+
+def system_sweep(from_w, to_w, *, complete=True, max_detour=5):
+    """The sweep's walk and completion on the oscillator (``sweep`` takes a train; the
+    same machinery on a ``System``): per point omega, stable, branch, amplitude."""
+    system = oscillator()
+    F_static = static_mesh_forces(system)
+    runaway = _walk.RUNAWAY * (np.abs(np.asarray(F_static)) / np.asarray(system.kbar)
+                               + np.asarray(system.backlash))
+    ctx = Context(system=system, eta=1, smoothing=0.0, from_hz=hz(from_w), to_hz=hz(to_w),
+                  mu_ref=1.0, max_step_hz=hz(0.02), max_points=3000,
+                  max_detour=max_detour, runaway=runaway)
+    walk = _walk.Walk(segments=[(hz(from_w), hz(to_w), K)])
+    log, post = SweepLog([]), PostStream(F_static)
+    pieces, records = _api._run_walk(ctx, walk, log, post, linear=False, points=2,
+                                     progress=None, F_static=F_static, complete=complete)
+    data = point_data(walk, log, post, ctx, F_static, linear=False, pieces=pieces)
+    x = np.array([np.asarray(_aft.synthesis(jnp.asarray(X), 256))[:, 0] for X in data["X"]])
+    return {"omega": data["omega"], "stable": data["stable"], "branch": data["branch"],
+            "amp": (x.max(1) - x.min(1)) / 2, "records": records, "walk": walk}
+
+
+def stable_amplitudes_at(s, w):
+    """Amplitudes where a stretch of stable points of one branch crosses ``w``."""
+    out = []
+    om, st, br, amp = s["omega"], s["stable"] == 1, s["branch"], s["amp"]
+    for i in range(len(om) - 1):
+        if br[i] == br[i + 1] and st[i] and st[i + 1] and (om[i] - w) * (om[i + 1] - w) <= 0:
+            t = 0.0 if om[i + 1] == om[i] else (w - om[i]) / (om[i + 1] - om[i])
+            out.append(amp[i] + t * (amp[i + 1] - amp[i]))
+    return sorted(out)
+
+
+def ivp_amplitude(omega, z0, periods=80):
+    def rhs(t, z):
+        x, v = z
+        return [v, 0.1 + 0.03 * np.cos(omega * t) - 0.1 * v - (x - np.clip(x, -1, 1))]
+
+    P = 2 * np.pi / omega
+    sol = scipy.integrate.solve_ivp(rhs, (0, periods * P), z0, rtol=1e-10, atol=1e-12,
+                                    t_eval=np.linspace((periods - 1) * P, periods * P, 2001))
+    return (sol.y[0].max() - sol.y[0].min()) / 2
+
+
+@pytest.fixture(scope="module")
+def references():
+    low = abs(0.03 / (1 - W**2 + 0.1j * W))  # in contact: linear
+    high = ivp_amplitude(W, [1.9, 0.0])      # a large start: the impacting state
+    assert high > 3 * low
+    return low, high
+
+
+@pytest.mark.parametrize("from_w, to_w", [(0.5, 1.2), (1.2, 0.5)], ids=["up", "down"])
+def test_both_stable_states_of_the_hysteresis_band_from_one_sweep(from_w, to_w, references):
+    bare = system_sweep(from_w, to_w, complete=False)
+    assert bare["walk"].restarts  # the walk left its branch: one state is missing
+    assert len(stable_amplitudes_at(bare, W)) == 1
+    s = system_sweep(from_w, to_w)
+    amps = stable_amplitudes_at(s, W)
+    low, high = references
+    assert len(amps) == 2
+    assert amps[0] == pytest.approx(low, rel=5e-3)
+    assert amps[1] == pytest.approx(high, rel=5e-3)
+    found = [r["found"] for r in s["records"]]
+    assert found[:2] == ["sweep", "restart"] and "back from restart" in found
+    # no orbit twice: the branches' crossings of W are distinct states
+    om, br, amp = s["omega"], s["branch"], s["amp"]
+    at = sorted(amp[i] + (W - om[i]) / (om[i + 1] - om[i]) * (amp[i + 1] - amp[i])
+                for i in range(len(om) - 1)
+                if br[i] == br[i + 1] and (om[i] - W) * (om[i + 1] - W) < 0)
+    assert np.all(np.diff(at) > 1e-2 * at[-1])
+
+
+def test_coexisting_jumps_list_where_a_stable_state_ends():
+    import xarray as xr
+
+    f = [1, 2, 3, 4, 5, 3, 4, 5, 6]
+    stable = [1, 1, 1, 1, 1, 1, 1, 1, 1]
+    branch = [0, 0, 0, 0, 0, 1, 1, 1, 1]
+    ds = xr.Dataset({"mesh_frequency_hz": ("point", f), "stable": ("point", stable),
+                     "branch": ("point", branch)})
+    (band,) = _summary.coexisting_jumps(ds)
+    assert (band["from_hz"], band["to_hz"], band["states"]) == (3.0, 5.0, 2)
+    assert band["jump_up_hz"] == [5.0] and band["jump_down_hz"] == [3.0]
+
+
+def test_atlas_knows_a_traced_orbit_and_not_another():
+    from gearjax._engine import hb as _hb
+    from gearjax._engine.newton import solve_hb
+
+    problem = _hb.hb_problem(oscillator(), _hb.HarmonicBalance(n_harmonics=K))
+    lams = np.linspace(0.5, 0.6, 6)
+    pts = [{"y": np.asarray(solve_hb(problem, w).y), "lam": float(w)} for w in lams]
+    atlas = _completion.Atlas()
+    atlas.add(_completion.Piece(key=0, K=K, pts=pts, branch=3))
+    y = np.asarray(solve_hb(problem, 0.55).y)
+    assert atlas.known(problem, 1.0, y, 0.55) == 3
+    assert atlas.known(problem, 1.0, 1.5 * y, 0.55) is None
