@@ -49,7 +49,7 @@ import numpy as np
 
 from .._engine import time_domain as td
 from .._engine import windowed as wd
-from .._errors import bad_argument
+from .._errors import bad_argument, fail
 from .._engine.responses import responses_from_samples
 from .._engine.results import result_word
 from .._io.results import sweep_dataset
@@ -272,10 +272,18 @@ def windowed_settings(case: GearCase, settings: wd.Windowed | None = None) -> di
     time integration``), the :class:`~gearjax.Windowed` fields, the window plan
     (``window_periods``, ``samples_per_period``, ``slowest_beat``: the slowest
     non-integer excitation frequency or beat over ``Omega``) and ``torus``
-    (:func:`~gearjax._gear.case.torus_fields`). **Raises:** ``ValueError`` as
-    :func:`~gearjax.window_plan`."""
+    (:func:`~gearjax._gear.case.torus_fields`). **Raises:** ``TrainError`` naming the
+    gear where a window would be longer than ``settings.max_window_periods`` (two
+    frequency groups so close that their beat takes longer: :func:`~gearjax.window_plan`;
+    no statistics are given rather than those of a window that truncates the beat)."""
     settings = WINDOWED if settings is None else settings
-    plan = wd.window_plan(case.system, settings)
+    try:
+        plan = wd.window_plan(case.system, settings)
+    except ValueError as e:
+        ratios = [str(r) for r in case.layout.ratio] if case.layout is not None else None
+        raise fail(case.train.source, f"gears.{case.gear.name}", ratios,
+                   f"the frequency groups' angle ratios ask for too long a window: "
+                   f"{str(e).removeprefix('simulate_windowed: ')}") from None
     out = {"method": "windowed time integration", "solver": type(settings.solver).__name__}
     for f in dataclasses.fields(settings):
         if f.name != "solver":
@@ -340,8 +348,10 @@ def simulate_gear(
     ``mode`` (``points`` or ``sweep``), ``start``, ``seconds``, ``command``.
 
     **Raises:** ``ArgumentError`` (a ``TrainError``) naming the argument for bad
-    frequencies, and as :func:`gear_case`; ``ValueError`` as
-    :func:`~gearjax.window_plan` for ``windowed`` settings that do not fit the gear.
+    frequencies, and as :func:`gear_case`; for a quasi-periodic gear ``TrainError``
+    where a window would be too long (:func:`windowed_settings`) and ``ValueError``
+    where ``windowed.tol`` is below ``1 / windowed.n_beats``
+    (:func:`~gearjax.simulate_windowed`).
     """
     t0 = time.perf_counter()
     f_hz, is_sweep = frequency_points(at_hz, from_hz, to_hz, points)

@@ -141,8 +141,9 @@ def verify_gear(
 
     **Returns:** :class:`VerifyResult`. **Raises:** ``ArgumentError`` (a ``TrainError``)
     naming the argument for bad frequencies, harmonics or tolerances, and as
-    :func:`~gearjax._gear.case.gear_case`; ``ValueError`` as :func:`~gearjax.window_plan`
-    for ``windowed`` settings that do not fit a quasi-periodic gear.
+    :func:`~gearjax._gear.case.gear_case`; for a quasi-periodic gear as
+    :func:`~gearjax._studies.simulate.simulate_gear` (a window too long, a ``windowed.tol``
+    below ``1 / windowed.n_beats``).
     """
     t0 = time.perf_counter()
     f_hz, is_sweep = frequency_points(at_hz, from_hz, to_hz, points)

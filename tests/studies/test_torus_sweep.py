@@ -60,22 +60,29 @@ def swept():
 
 
 def test_torus_sweep_passes_both_folds(swept):
+    """Up through the upper fold (0.852 rad/s with the first tone alone), back along the
+    unstable middle branch, through the lower fold (0.6365) and on to the band's end: the
+    two outermost folds, the mean force fixed by the balance of the mean, and stability
+    that changes only where the branch turns (a multiplier through +1 at a fold; the
+    grazing of the contact boundary adds small fold pairs of its own, near 0.662 and
+    0.637 rad/s here)."""
     system, ctx, walk, data = swept
     assert walk.stop == "reached_end" and not walk.restarts
     folds = sorted(f * 2 * math.pi for f in walk.folds)  # rad/s
-    assert len(folds) == 2
-    assert folds[0] == pytest.approx(0.637, abs=0.01)
-    assert folds[1] == pytest.approx(0.852, abs=0.01)
+    assert folds[0] == pytest.approx(0.6365, abs=0.005)
+    assert folds[-1] == pytest.approx(0.852, abs=0.01)
     # the mean of the force is fixed by the balance of the mean: 0.1, at every point
     mean = np.asarray(data["responses"].mean_force)[:, 0]
     np.testing.assert_allclose(mean, 0.1, rtol=0, atol=1e-9)
-    # between the folds the branch runs back: its points there are unstable, and the
-    # stable ones outside are stable
     om, stable = data["omega"], data["stable"]
-    order = np.arange(len(om))
-    turn = [int(np.argmax(om)), int(np.argmin(np.where(order > np.argmax(om), om, np.inf)))]
-    assert np.all(stable[turn[0] + 2: turn[1] - 1] == 0)
-    assert np.all(stable[: turn[0] - 2] == 1) and np.all(stable[turn[1] + 2:] == 1)
+    assert set(np.unique(stable)) == {0, 1}
+    turns = np.flatnonzero(np.diff(np.sign(np.diff(om))) != 0) + 1  # where omega turns back
+    for i in np.flatnonzero(np.diff(stable) != 0):
+        assert np.min(np.abs(turns - i - 0.5)) <= 2.5, (i, om[i])
+    # the middle branch, from the upper fold back to the lower one, is unstable
+    top = int(np.argmax(om))
+    low = top + int(np.argmin(om[top:]))
+    assert np.all(stable[top + 2: low - 5] == 0)
 
 
 @pytest.mark.parametrize("which", ["upper", "lower"])

@@ -86,6 +86,25 @@ def test_a_time_shifted_system_is_the_clock_started_later(train):
     assert _simulate.time_shifted(case.system, 0.0).mesh_angle == case.system.mesh_angle
 
 
+def test_a_window_longer_than_allowed_is_refused(train, monkeypatch, capsys):
+    """No statistics rather than those of windows that truncate the slowest beat: refused
+    before any work, in one line from the command."""
+    short = gj.Windowed(max_window_periods=100)
+    msg = (r"gears\.first = \['1', '81/70'\]: the frequency groups' angle ratios ask for "
+           r"too long a window: .* needs 637 base periods, more than "
+           r"Windowed\.max_window_periods = 100")
+    with pytest.raises(gj.TrainError, match=msg):
+        gj.simulate_gear(train, "first", [10500.0], windowed=short)
+    with pytest.raises(gj.TrainError, match=msg):
+        gj.verify_gear(train, "first", [10500.0], windowed=short)
+    monkeypatch.setattr(_simulate, "WINDOWED", short)
+    for command in ("simulate", "verify"):
+        assert main([command, str(TRAIN), "--at", "10500"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err[-1].startswith("gearjax: error: ") and "637 base periods" in err[-1]
+        assert "Traceback" not in "\n".join(err)
+
+
 def test_verify_linear_within_1_percent(verified_linear):
     r = verified_linear
     assert r.tolerance == 0.01 and r.all_ok and r.ok.shape == (2, 16)
@@ -199,8 +218,9 @@ def test_simulate_command_json(monkeypatch, capsys, tmp_path, simulated):
 
 def test_verify_command_json(monkeypatch, capsys, tmp_path, verified):
     monkeypatch.setattr(_simulate, "WINDOWED", FAST)
-    nc = tmp_path / "verify.nc"
-    code = main(["verify", str(TRAIN), "--at", "10500", "--json", "--out", str(nc)])
+    nc, fig = tmp_path / "verify.nc", tmp_path / "verify.png"
+    code = main(["verify", str(TRAIN), "--at", "10500", "--json", "--out", str(nc),
+                 "--plot", str(fig)])
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and out["all_ok"] and out["tolerance"] == 0.02
     assert out["reference"]["method"] == "windowed time integration"
@@ -216,6 +236,7 @@ def test_verify_command_json(monkeypatch, capsys, tmp_path, verified):
     root, hb, ni = load_verify(nc)
     assert json.loads(root.attrs["reference"])["window_periods"] == 160
     assert hb["harmonics"].dims == ("point", "angle") and "windows" in ni
+    assert fig.stat().st_size > 10_000
     assert main(["verify", str(TRAIN), "--at", "10500"]) == 0
     text = capsys.readouterr().out
     assert "windows of 160 base periods" in text and "(4, 4)" in text

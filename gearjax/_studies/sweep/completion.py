@@ -127,13 +127,12 @@ class Atlas:
             return
         self.pieces.append(piece)
         ys = [np.asarray(p["y"]) for p in piece.pts]
-        if piece.eta > 1:
+        halves = [ys]
+        if piece.eta > 1:  # periodic: K an int
             n = ys[0].size // (2 * piece.K + 1)
-            ys += [_doubling.mirror(y, piece.K, n) for y in ys]
-        lams = [p["lam"] for p in piece.pts]
-        for half in range(len(ys) // len(lams)):
-            z = np.stack([np.append(y, lam) for y, lam in
-                          zip(ys[half * len(lams):(half + 1) * len(lams)], lams)])
+            halves.append([_doubling.mirror(y, piece.K, n) for y in ys])
+        for half in halves:
+            z = np.stack([np.append(y, p["lam"]) for y, p in zip(half, piece.pts)])
             chord = np.linalg.norm(np.diff(z, axis=0), axis=1)
             gap = np.maximum(np.r_[chord, 0.0], np.r_[0.0, chord])
             self._z.setdefault((piece.K, piece.eta), []).append(z)
