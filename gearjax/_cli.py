@@ -725,6 +725,7 @@ def _sweep_cmd(args, train, notes) -> int:
 def _sweep_run(args, train, notes, journal) -> int:
     from ._io.results import save_results
     from ._studies.sweep import progress_bar, summary_json, sweep
+    from ._studies.sweep.summary import bifurcation_lines
 
     if args.resume and journal.exists():
         _stderr(f"sweep: resuming from {journal}")
@@ -786,8 +787,8 @@ def _sweep_run(args, train, notes, journal) -> int:
     print(f"unstable points: {int(np.sum(stable == 0))}")
     for b in out["bifurcations"]:
         print(f"  stability changes near {b['mesh_frequency_hz']:.1f} Hz: {b['kind']}")
-    for note in out["bifurcation_notes"]:
-        print(f"  {note['note']}")
+    for line in bifurcation_lines(out["bifurcation_notes"]):
+        print(f"  {line}")
     for stage in dict.fromkeys(ds["stage"].values.tolist()):
         cols = ds["stage"].values == stage
         peak = np.nanargmax(np.nanmax(rms[:, cols], axis=1))

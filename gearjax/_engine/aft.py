@@ -291,6 +291,37 @@ def resize(old: Basis, new: Basis, X):
     return out
 
 
+def line_matrix(basis: Basis, tau) -> np.ndarray:
+    """The basis functions on the line ``theta = rates tau``, ``(S, 2P+1)`` (NumPy): row
+    ``s`` holds ``[1, cos(nu_1 tau_s), sin(nu_1 tau_s), ...]`` at the base phases ``tau``
+    ``(S,)`` (rad, ``tau = omega_0 t``), so that the samples of the function with
+    coefficients ``X`` along the line are ``line_matrix(basis, tau) @ X``."""
+    tau = np.asarray(tau, dtype=float)
+    nu = frequency_numbers(basis)[1::2]
+    arg = tau[:, None] * nu[None, :]
+    out = np.empty((tau.size, basis.n_coefficients))
+    out[:, 0] = 1.0
+    out[:, 1::2] = np.cos(arg)
+    out[:, 2::2] = np.sin(arg)
+    return out
+
+
+def line_analysis(basis: Basis, tau, x) -> np.ndarray:
+    """Coefficients ``(2P+1, ...)`` on ``basis`` fitted by least squares to samples ``x``
+    ``(S, ...)`` taken along the line at base phases ``tau`` ``(S,)`` (rad): the inverse
+    of :func:`line_matrix` for a function of the basis, a projection otherwise. On a
+    torus the samples must cover the torus (a span of many beats of its angles) for the
+    fit to be well posed. **Raises:** ``ValueError`` with fewer samples than
+    coefficients."""
+    A = line_matrix(basis, tau)
+    if A.shape[0] < A.shape[1]:
+        raise ValueError(f"line_analysis: {A.shape[0]} samples cannot determine "
+                         f"{A.shape[1]} coefficients")
+    x = np.asarray(x, dtype=float)
+    X, *_ = np.linalg.lstsq(A, x.reshape(x.shape[0], -1), rcond=None)
+    return X.reshape((basis.n_coefficients,) + x.shape[1:])
+
+
 def torus_place(basis: Basis, cos: jnp.ndarray, sin: jnp.ndarray, orders, angle) -> jnp.ndarray:
     """Coefficients ``(2P+1, r)`` of ``sum_l cos[:, l] cos(o_l theta_g(l)) + sin[:, l]
     sin(o_l theta_g(l))``.

@@ -49,14 +49,17 @@ steady-state search refuses a quasi-periodic ``System`` (``ValueError``,
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .._config import require_x64
+from . import aft as _aft
 from .mesh_force import mesh_force, stiffness_series, transmission_error
 from .results import RESULTS
 from .static import static_deflection
@@ -300,19 +303,56 @@ def contact_state(system: System):
     return x0, jnp.zeros_like(x0)
 
 
-def hb_initial_state(X: Float[Array, "C n"], omega, eta: int = 1):
+def hb_initial_state(X: Float[Array, "C n"], omega, eta: int = 1, basis=None):
     """State at ``t = 0`` of a harmonic-balance solution.
 
     **Arguments:** ``X`` ``(2K+1, n)``: coefficients of ``x(tau)``, ``tau = (Omega /
     eta) t`` (``HBSolution.X``); ``omega``: base frequency Omega (rad/s); ``eta``: the
-    sub-harmonic index of the solution. **Returns:** ``(x0, v0)``, ``(n,)`` each
-    (rad or m, and rad/s or m/s).
+    sub-harmonic index of the solution; ``basis``: the
+    :class:`~gearjax._engine.aft.Basis` of a torus solution ``(2P+1, n)`` (``None``: the
+    periodic harmonics ``1..K``), whose wave vector ``k`` turns at ``k . rates`` times
+    ``Omega / eta``. **Returns:** ``(x0, v0)``, ``(n,)`` each (rad or m, and rad/s or
+    m/s).
     """
     X = jnp.asarray(X)
-    k = jnp.arange(1, (X.shape[0] - 1) // 2 + 1)[:, None]
+    if basis is None:
+        k = jnp.arange(1, (X.shape[0] - 1) // 2 + 1)[:, None]
+    else:
+        k = jnp.asarray(_aft.frequency_numbers(basis)[2::2])[:, None]
     x0 = X[0] + jnp.sum(X[1::2], axis=0)
     v0 = (omega / eta) * jnp.sum(k * X[2::2], axis=0)
     return x0, v0
+
+
+def sample_trajectory(system: System, omega, x0, v0, tau, settings: TimeDomain = TimeDomain()):
+    """The motion from ``(x0, v0)`` at ``t = 0`` sampled at the base phases ``tau``
+    ``(S,)`` (rad, ``tau = Omega t``, increasing, ``tau[0] > 0``; NumPy: the span is a
+    compile key), any system (periodic or quasi-periodic). The equations, scaling and
+    solver of :func:`simulate` (``settings``: its tolerances, controller and
+    ``max_steps`` per base period). **Returns:** ``(x, v, ok)``: ``x``, ``v`` ``(S, n)``
+    (rad or m, and per s) and whether the solver reached the last phase."""
+    tau = np.asarray(tau, dtype=float)
+    periods = max(1, math.ceil(float(tau[-1]) / (2 * math.pi)))
+    return _sample_trajectory(system, *_arrays(omega, x0, v0, tau), settings, periods)
+
+
+@eqx.filter_jit
+def _sample_trajectory(system, omega, x0, v0, tau, settings, periods):
+    require_x64()
+    problem = integration_problem(system)
+    n = system.n_dof
+    z0 = jnp.concatenate([x0 / problem.x_scale, v0 / (omega * problem.x_scale)])
+    controller = dfx.PIDController(rtol=settings.rtol, atol=settings.atol,
+                                   pcoeff=settings.pcoeff, icoeff=settings.icoeff)
+    sol = dfx.diffeqsolve(dfx.ODETerm(vector_field), settings.solver, 0.0, tau[-1], None, z0,
+                          args=(problem, omega), saveat=dfx.SaveAt(ts=tau),
+                          stepsize_controller=controller,
+                          max_steps=settings.max_steps * periods, adjoint=dfx.ForwardMode(),
+                          throw=False)
+    z = sol.ys
+    x = problem.x_scale * z[:, :n]
+    v = omega * problem.x_scale * z[:, n:]
+    return x, v, sol.result == dfx.RESULTS.successful
 
 
 # ---------------------------------------------------------------------- steady state

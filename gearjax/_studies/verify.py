@@ -34,8 +34,8 @@ K_G)`` per point from :func:`~gearjax._studies.harmonics.torus_orders_rule` (or
 above (with backlash the homotopy in backlash where Newton fails: a torus has no
 period to settle to); its responses are torus averages and ``stable`` is the torus
 stability verdict. Step 2 integrates from the torus solution's state at ``t = 0``
-(:func:`torus_initial_state`) in windows (:func:`~gearjax._studies.simulate.integrate_windowed`)
-until consecutive windows' statistics agree: the reference is the last window's
+(:func:`~gearjax.hb_initial_state` on its basis) in windows
+(:func:`~gearjax._studies.simulate.integrate_windowed`) until consecutive windows' statistics agree: the reference is the last window's
 statistics (``VerifyResult.reference`` says the window length, the windows' agreement
 tolerance and how many must agree). An integration point is converged where its result
 is ``quasi_periodic``. Where a non-linear response locks onto a rational winding or
@@ -332,10 +332,9 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
     (:func:`~gearjax._engine.results.result_word`), ``stable`` ``(P,)`` bool (NaN where
     not converged), ``responses`` (:class:`~gearjax.MeshResponses`, fields ``(P, m)``;
     NaN where not converged), ``x0``, ``v0`` ``(P, n)``: the state at ``t = 0`` of each
-    solution (rad or m, and per s; :func:`~gearjax.hb_initial_state`, or
-    :func:`torus_initial_state`), and ``X``. Periodic gear: ``X`` ``(P, 2Kmax+1, n)``
-    (coefficients zero-padded to the largest K) and ``harmonics`` ``(P,)``; torus:
-    ``X`` a list of ``(C_p, n)`` (each point's own truncation set) and ``harmonics``
+    solution (rad or m, and per s; :func:`~gearjax.hb_initial_state` on the point's
+    basis), and ``X``. Periodic gear: ``X`` ``(P, 2Kmax+1, n)`` (coefficients
+    zero-padded to the largest K) and ``harmonics`` ``(P,)``; torus: ``X`` a list of ``(C_p, n)`` (each point's own truncation set) and ``harmonics``
     ``(P, G)`` orders.
     """
     f_hz = np.asarray(f_hz, dtype=float)
@@ -385,10 +384,9 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
         for j, i in enumerate(idx):
             if torus:
                 X[i] = np.asarray(Xs[j])
-                x0[i], v0[i] = torus_initial_state(problem.basis, Xs[j], omegas[i])
             else:
                 X[i, :problem.shape[0]] = np.asarray(Xs[j])
-                x0[i], v0[i] = td.hb_initial_state(Xs[j], omegas[i])
+            x0[i], v0[i] = td.hb_initial_state(Xs[j], omegas[i], 1, problem.basis)
             stable[i] = bool(post["stable"][j])
             rows[i] = jax.tree.map(lambda a: np.asarray(a[j]), post["responses"])
     responses = jax.tree.map(lambda *a: np.stack(a), *rows)
@@ -398,18 +396,6 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
     return {"X": X, "harmonics": np.array(ks, dtype=int), "result": result,
             "stable": np.where(failed, np.nan, stable), "responses": responses,
             "x0": x0, "v0": v0}
-
-
-def torus_initial_state(basis, X, omega):
-    """State at ``t = 0`` of a torus harmonic-balance solution: ``X`` ``(2P+1, n)``, the
-    coefficients on ``basis`` (:class:`~gearjax._engine.aft.Basis`) of ``x(theta)``
-    with ``theta_g = rates_g Omega t``; ``omega``: Omega (rad/s). The torus counterpart
-    of :func:`~gearjax.hb_initial_state`: ``x0 = X_0 + sum_j a_j``, ``v0 = Omega sum_j
-    nu_j b_j`` (``a_j``, ``b_j`` the cosine and sine rows of wave vector ``k_j``, ``nu_j
-    = k_j . rates``). **Returns:** ``(x0, v0)``, ``(n,)`` each (NumPy)."""
-    X = np.asarray(X)
-    nu = _aft.frequency_numbers(basis)[2::2]
-    return X[0] + X[1::2].sum(axis=0), float(omega) * (nu[:, None] * X[2::2]).sum(axis=0)
 
 
 # ------------------------------------------------------------------------------ JSON

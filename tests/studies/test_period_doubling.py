@@ -246,3 +246,6 @@ def test_the_summary_says_where_each_doubling_leads():
     assert a["branch"] == 1 and "branch 1 has twice the period" in a["note"]
     assert b["branch"] is None and "not followed (too large)" in b["note"]
     assert c["kind"] == "neimark_sacker" and "quasi-periodic" in c["note"]
+    lines = _summary.bifurcation_lines([c, a, dict(c, mesh_frequency_hz=6.0), b])
+    assert lines[:2] == [a["note"], b["note"]] and len(lines) == 3
+    assert lines[2].startswith("Neimark-Sacker near 6.0, 7.0 Hz") and "quasi" in lines[2]

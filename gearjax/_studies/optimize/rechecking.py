@@ -74,7 +74,8 @@ def point_state(ds, i: int):
     (its ``displacement_cos`` / ``displacement_sin`` harmonics), to start an integration
     on that orbit (:func:`~gearjax.hb_initial_state`)."""
     X = displacement_coefficients(ds, i)
-    eta = json_solver(ds).get("eta", 1)
+    eta = (ds["eta"].values[i] if "eta" in ds.variables  # per point: a doubled branch's 2
+           else json_solver(ds).get("eta", 1))
     return hb_initial_state(jnp.asarray(X), float(ds["omega"].values[i]), int(eta))
 
 

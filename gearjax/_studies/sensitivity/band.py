@@ -44,7 +44,8 @@ class BandSensitivity:
     ``frequencies_hz``, ``point_values`` ``(n,)`` (NaN where refused),
     ``point_gradients`` ``(n, p)`` (NaN rows where refused), ``weights`` ``(n,)``:
     ``dR/dr_i``; ``excluded``: ``{frequency_hz: reason}`` of the refused points;
-    ``mesh``, ``response``, ``harmonics``.
+    ``mesh``, ``response``, ``harmonics`` (K, or the orders per angle on a torus);
+    ``torus``: :func:`~gearjax._gear.case.torus_fields` (``None`` for a periodic gear).
     """
 
     objective: str
@@ -62,7 +63,8 @@ class BandSensitivity:
     excluded: dict
     mesh: str
     response: str
-    harmonics: int
+    harmonics: int | tuple[int, ...]
+    torus: dict | None = None
 
 
 def band_sensitivity(
@@ -89,7 +91,9 @@ def band_sensitivity(
     ``objective``: ``peak`` (log-sum-exp, temperature ``temperature`` relative to the
     largest response) or ``integral`` (trapezoid, response times Hz); ``harmonics``: one
     K for the band (default: the sweep's rule at the lowest frequency, the largest it
-    gives in the band); the rest as :func:`~gearjax._studies.sensitivity.sensitivity`.
+    gives in the band; on a torus the orders per angle of
+    :func:`~gearjax._studies.harmonics.torus_orders_rule` at the lowest frequency, or
+    ``harmonics`` on every angle); the rest as :func:`~gearjax._studies.sensitivity.sensitivity`.
 
     **Returns:** :class:`BandSensitivity`. **Raises:** ``ArgumentError`` naming the
     argument for bad input, and naming ``frequencies_hz`` when fewer than two points are
@@ -124,7 +128,7 @@ def band_sensitivity(
         pg, stable, distance = gp.differentiate(sol, fi, resp, fold_tol)
         raw[i] = float(pg.value)
         try:
-            check_point(stable, distance, f"{fi:g} Hz", fold_tol)
+            check_point(stable, distance, f"{fi:g} Hz", fold_tol, torus=gp.torus is not None)
         except SensitivityRefused as e:
             excluded[float(fi)] = str(e)
             continue
@@ -161,4 +165,4 @@ def band_sensitivity(
         value=float(value), paths=gp.paths, values=np.asarray(gp.theta), derivative=d,
         normalised=normalise(d, np.asarray(gp.theta), float(value)), frequencies_hz=f,
         point_values=vals, point_gradients=grads, weights=w, excluded=excluded,
-        mesh=mesh, response=response, harmonics=gp.settings.n_harmonics)
+        mesh=mesh, response=response, harmonics=gp.settings.n_harmonics, torus=gp.torus)

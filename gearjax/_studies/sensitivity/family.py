@@ -5,6 +5,11 @@ Parameters are TOML paths (:mod:`gearjax._gear.paths`): ``1.mesh_stiffness.sun``
 ``2.planet_mass``, ``1.planet_angles_deg.2``, ``gears.first.input_torque``, ... A
 parameter value is in the file's unit, so a derivative with respect to a path in
 degrees is per degree.
+
+A gear whose mesh frequencies fall in ``G > 1`` incommensurate groups is assembled on its
+torus (model.md, "Incommensurate stages"): the family carries the gear's
+:class:`~gearjax._gear.frequency_groups.TorusLayout` (``gear_case(..., torus=True).layout``),
+which no continuous parameter changes (teeth are integers).
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from ..._engine.responses import mesh_responses, static_mesh_forces
 from ..._engine.system import System
 from ..._errors import bad_argument
 from ..._gear.assembly import assemble
+from ..._gear.frequency_groups import TorusLayout
 from ..._gear.paths import Leaf, continuous_paths, leaf_selector, set_leaf
 from ..._gear.train import Train
 
@@ -35,7 +41,9 @@ class GearFamily(eqx.Module):
     """``theta -> System``: gear ``gear`` of ``train`` with the TOML ``paths`` set to
     ``theta`` (values in the file's units), assembled; ``backlash_scale`` multiplies
     every backlash (0: the linear system, where a backlash path has exactly no
-    effect).
+    effect); ``layout``: ``None`` for the periodic system of the gear's common base, or
+    the gear's torus layout (kept as a hashable tuple, :meth:`of` takes the
+    :class:`~gearjax._gear.frequency_groups.TorusLayout`) for its torus system.
 
     Pure in ``theta``, so ``jit`` and ``grad`` pass through (``assemble`` is). The
     paths are static strings and the linear switch an array, so families of the same
@@ -46,12 +54,25 @@ class GearFamily(eqx.Module):
     paths: tuple[str, ...] = eqx.field(static=True)
     gear: str = eqx.field(static=True)
     backlash_scale: Float[Array, ""] = eqx.field(converter=jnp.asarray, default=1.0)
+    layout: tuple | None = eqx.field(static=True, default=None)
 
     @classmethod
-    def of(cls, train: Train, paths: Sequence[str], gear: str, linear: bool = False
-           ) -> "GearFamily":
+    def of(cls, train: Train, paths: Sequence[str], gear: str, linear: bool = False,
+           layout: TorusLayout | None = None) -> "GearFamily":
+        """The family of ``gear``; ``layout``: its torus layout (``GearCase.layout``;
+        ``None``: the periodic system)."""
+        frozen = None if layout is None else (tuple(layout.stage.items()), tuple(layout.ripple),
+                                              tuple(layout.ratio))
         return cls(train=train, paths=tuple(paths), gear=gear,
-                   backlash_scale=jnp.asarray(0.0 if linear else 1.0))
+                   backlash_scale=jnp.asarray(0.0 if linear else 1.0), layout=frozen)
+
+    @property
+    def torus_layout(self) -> TorusLayout | None:
+        """The :class:`~gearjax._gear.frequency_groups.TorusLayout` (``None``: periodic)."""
+        if self.layout is None:
+            return None
+        stage, ripple, ratio = self.layout
+        return TorusLayout(stage=dict(stage), ripple=ripple, ratio=ratio)
 
     @property
     def leaves(self) -> tuple[Leaf, ...]:
@@ -72,7 +93,7 @@ class GearFamily(eqx.Module):
         return jnp.stack(vals) if vals else jnp.zeros(0)
 
     def __call__(self, theta: Float[Array, " p"]) -> System:
-        system = assemble(self.train_at(theta), self.gear)
+        system = assemble(self.train_at(theta), self.gear, layout=self.torus_layout)
         return dataclasses.replace(system, backlash=system.backlash * self.backlash_scale)
 
 

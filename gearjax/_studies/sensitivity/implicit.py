@@ -75,8 +75,9 @@ def implicit_gradient(family, theta: Float[Array, " p"], settings: _hb.HarmonicB
     balance ``y`` was solved with; ``y`` ``(N,)``: scaled unknowns converged at ``theta``
     (``HBSolution.y`` of ``hb_problem(family(theta), settings)``); ``omega``: base
     frequency (rad/s); ``response``: ``(problem, X, omega) -> scalar`` (e.g.
-    :class:`~gearjax._studies.sensitivity.MeshResponse`), ``X`` ``(2K+1, n)`` physical
-    coefficients.
+    :class:`~gearjax._studies.sensitivity.MeshResponse`), ``X`` ``(C, n)`` physical
+    coefficients (``C = 2K+1``, or ``2P+1`` for the ``P`` wave vectors of a torus basis:
+    the derivative is generic over the basis).
 
     **Returns:** :class:`PointGradient`. Whether the point may be differentiated (not at
     or near a fold, stable) is the caller's test: :func:`point_status`,
@@ -101,7 +102,7 @@ def implicit_gradient(family, theta: Float[Array, " p"], settings: _hb.HarmonicB
 def solve_at(family, theta: Float[Array, " p"], settings: _hb.HarmonicBalance, omega,
              X0: Array | None = None) -> _hb.HBSolution:
     """Newton at ``omega`` (rad/s) for the system ``family(theta)``, from the physical
-    coefficients ``X0`` ``(2K+1, n)`` or, when ``None``, the linear in-contact guess."""
+    coefficients ``X0`` ``(C, n)`` or, when ``None``, the linear in-contact guess."""
     problem = _hb.hb_problem(family(theta), settings)
     y0 = _hb.linear_guess(problem, omega) if X0 is None else (X0 / problem.x_scale).reshape(-1)
     return newton(problem, omega, y0)
@@ -137,12 +138,21 @@ class SensitivityRefused(ValueError):
 
 @eqx.filter_jit
 def point_status(problem: _hb.HBProblem, X: Array, omega) -> tuple[Array, Array]:
-    """``(stable, fold_distance)`` of the solution ``X`` ``(2K+1, n)`` at ``omega`` (rad/s).
+    """``(stable, fold_distance)`` of the solution ``X`` ``(C, n)`` (``C = 2K+1``, or ``2P+1``
+    on a torus) at ``omega`` (rad/s).
 
     ``stable``: :func:`gearjax.stability`; ``fold_distance``: ``min |mu - 1|`` over its
     Floquet multipliers ``mu`` (those of mesh-free rigid-body modes excluded). A fold
     (saddle-node) of the periodic solution is where a real multiplier passes through +1:
     there ``dres/dy`` is singular and ``dy/dp`` unbounded.
+
+    On a torus (``G > 1``) the multipliers are those of :func:`gearjax.stability`: the
+    ``q``-th roots of the monodromy over the near return of the torus line (growth per
+    turn of the base angle, ``gearjax._engine.floquet``). A torus fold puts one of them
+    at +1 as well; the test is conservative there, since a root's angle is only known
+    within ``2 pi / q`` (exponents are defined modulo the torus's combination
+    frequencies), so a lightly damped mode far below the base frequency can also come
+    within ``fold_tol`` of +1 and refuse a point that has a derivative.
 
     Why the multipliers and not the singular values of the HB Jacobian: the sampled
     (AFT) backlash force makes the discrete residual piecewise smooth, so at a fold the
@@ -155,17 +165,22 @@ def point_status(problem: _hb.HBProblem, X: Array, omega) -> tuple[Array, Array]
     return s.stable, jnp.min(jnp.where(s.excluded, jnp.inf, jnp.abs(s.multipliers - 1.0)))
 
 
-def check_point(stable, fold_distance, where: str, fold_tol: float = FOLD_TOL) -> None:
+def check_point(stable, fold_distance, where: str, fold_tol: float = FOLD_TOL, *,
+                torus: bool = False) -> None:
     """Raise :class:`SensitivityRefused` when the point ``where`` (e.g. ``"3000 Hz"``) is
-    at or near a fold (``fold_distance < fold_tol``) or unstable."""
+    at or near a fold (``fold_distance < fold_tol``) or unstable; ``torus``: the solution
+    is quasi-periodic (the message says so)."""
     d = float(fold_distance)
+    mult = ("a multiplier per turn of the base angle (the near-return monodromy's q-th "
+            "root)" if torus else "a Floquet multiplier")
     if not d >= fold_tol:
         raise SensitivityRefused(RESULTS.fold, (
-            f"the point at {where} is at or near a fold of the response curve (a Floquet "
-            f"multiplier lies {d:.2g} from +1, closer than {fold_tol:g}): the response jumps "
+            f"the point at {where} is at or near a fold of the response curve ({mult} lies "
+            f"{d:.2g} from +1, closer than {fold_tol:g}): the response jumps "
             "there and is not a differentiable function of the parameters; choose a "
             "frequency away from the fold"))
     if not bool(stable):
+        kind = "quasi-periodic (torus)" if torus else "periodic"
         raise SensitivityRefused(RESULTS.unstable, (
-            f"the periodic solution at {where} is unstable (a Floquet multiplier lies outside "
+            f"the {kind} solution at {where} is unstable ({mult} lies outside "
             "the unit circle): its derivatives describe no response the train shows"))

@@ -25,13 +25,16 @@ def path_unit(path: str) -> str:
 def sensitivity_json(result: Sensitivity, top: int | None = None) -> dict:
     """The ``sensitivity`` JSON: point fields and ``derivatives``, ranked by
     ``|normalised|`` (each ``{path, value, unit, derivative, derivative_unit,
-    normalised}``; ``reason`` where ``normalised`` is null)."""
+    normalised}``; ``reason`` where ``normalised`` is null); ``harmonics`` is K, or on a
+    torus the list of orders per angle, and ``torus`` what the torus study solved
+    (:func:`~gearjax._gear.case.torus_fields`; null for a periodic gear)."""
     out = {
         "gear": result.gear,
         "reference_stage": result.reference_stage,
         "mesh_frequency_hz": result.mesh_frequency_hz,
         "omega": result.omega,
-        "harmonics": result.harmonics,
+        "harmonics": list(result.harmonics) if isinstance(result.harmonics, tuple)
+        else result.harmonics,
         "linear": result.linear,
         "response": result.response,
         "unit": result.unit,
@@ -45,6 +48,7 @@ def sensitivity_json(result: Sensitivity, top: int | None = None) -> dict:
         "reason": result.message,
         "mesh_values": {m: float(v) for m, v in zip(result.meshes, result.mesh_values)},
         "derivatives": [],
+        "torus": result.torus,
     }
     if result.derivative is None:
         out["derivatives"] = None

@@ -21,7 +21,7 @@ from ..._engine.responses import mesh_responses, static_mesh_forces
 from ..._engine.results import RESULTS, result_word
 from ..._engine.system import System
 from ..._errors import bad_argument
-from ..._gear.case import gear_case
+from ..._gear.case import gear_case, torus_fields
 from ..._gear.train import Train
 from .. import harmonics as _harmonics
 from ..sweep import backlash_start
@@ -37,7 +37,8 @@ class Sensitivity:
     **Fields:**
 
     - ``gear``, ``reference_stage``, ``mesh_frequency_hz`` (reference stage, Hz),
-      ``omega`` (base, rad/s), ``harmonics`` (K), ``linear``;
+      ``omega`` (base, rad/s; on a torus the base of angle 0), ``harmonics`` (K: an
+      ``int``, or on a torus the orders per angle, a tuple), ``linear``;
     - ``response`` (``rms`` | ``max`` | ``dlf``), ``unit``, ``mesh`` (name such as
       ``1.sp1``), ``value``: the response there (NaN when not converged);
     - ``result``: ``ok``, ``not_converged``, ``fold`` or ``unstable``; ``message``:
@@ -47,14 +48,16 @@ class Sensitivity:
       ``derivative``: ``dR/dp`` per unit of each path (``None`` when refused);
       ``normalised``: ``(p / R) dR/dp`` (NaN where ``p`` or ``R`` is 0);
       ``partial``: the explicit part ``dr/dp`` at fixed solution;
-    - ``meshes``: every mesh name; ``mesh_values``: the response of every mesh.
+    - ``meshes``: every mesh name; ``mesh_values``: the response of every mesh;
+    - ``torus``: what a torus study solves (:func:`~gearjax._gear.case.torus_fields`:
+      ``G``, angle ratios, truncation, near return); ``None`` for a periodic gear.
     """
 
     gear: str
     reference_stage: str
     mesh_frequency_hz: float
     omega: float
-    harmonics: int
+    harmonics: int | tuple[int, ...]
     linear: bool
     response: str
     unit: str
@@ -73,6 +76,7 @@ class Sensitivity:
     partial: np.ndarray | None
     meshes: tuple[str, ...]
     mesh_values: np.ndarray
+    torus: dict | None = None
 
     @property
     def ok(self) -> bool:
@@ -99,33 +103,45 @@ class GearPoint:
     for the sweep's rule at the lowest of ``f_hz``; ``f_hz``: the reference-stage mesh
     frequency or frequencies (Hz) to be solved.
 
+    A gear whose frequencies fall in ``G > 1`` groups is solved on its torus (as the
+    sweep solves it): orders ``K_g`` per angle from
+    :func:`~gearjax._studies.harmonics.torus_orders_rule` at the lowest of ``f_hz``, or
+    ``harmonics`` on every angle.
+
     **Attributes:** ``gear`` (name), ``ref`` (reference stage), ``mu_ref``, ``paths``,
     ``family`` (:class:`~gearjax._studies.sensitivity.GearFamily`), ``theta`` ``(p,)``,
-    ``settings``, ``problem`` and ``system`` at ``theta``, ``has_backlash``.
+    ``settings``, ``problem`` and ``system`` at ``theta``, ``has_backlash``, ``torus``
+    (:func:`~gearjax._gear.case.torus_fields`, ``None`` for a periodic gear).
 
     **Raises:** ``ArgumentError`` naming ``paths`` or ``harmonics``; ``TrainError`` as
     :func:`~gearjax._gear.case.gear_case` and the harmonics rules.
     """
 
     def __init__(self, train: Train, gear, paths, stage, linear, harmonics, f_hz):
-        case = gear_case(train, gear, stage, linear)
+        case = gear_case(train, gear, stage, linear, torus=True)
         self.ref, self.mu_ref = case.stage, case.mu_ref
         self.gear, self.train, self.linear = case.gear.name, train, linear
+        self.torus = torus_fields(case)
         self.paths = tuple(leaf.path for leaf in check_paths(train, paths, gear=self.gear,
                                                               linear=linear))
         if harmonics is not None and (int(harmonics) != harmonics or harmonics < 1):
             raise bad_argument("harmonics", harmonics, "must be an integer >= 1")
-        self.family = GearFamily.of(train, self.paths, self.gear, linear)
+        self.family = GearFamily.of(train, self.paths, self.gear, linear, case.layout)
         self.theta = self.family.theta()
         f = np.atleast_1d(np.asarray(f_hz, dtype=float))
-        if harmonics is None:
-            harmonics = _harmonics.harmonics_rule(
-                float(f.min()) / self.mu_ref, _harmonics.excitation_floor(case.system),
+        if harmonics is not None:
+            _harmonics.require_harmonics(case.system, harmonics)
+            K = (int(harmonics),) * case.G if case.G > 1 else int(harmonics)
+        elif case.G > 1:
+            K = _harmonics.torus_orders_rule(
+                case.system, float(case.omega(f.min())),
                 cutoff_hz=_harmonics.response_cutoff_hz(case.system))
         else:
-            _harmonics.require_harmonics(case.system, harmonics)
-        _harmonics.require_size(case.system, int(harmonics), mu=case.mu)
-        self.settings = _hb.HarmonicBalance(n_harmonics=int(harmonics))
+            K = _harmonics.harmonics_rule(
+                float(f.min()) / self.mu_ref, _harmonics.excitation_floor(case.system),
+                cutoff_hz=_harmonics.response_cutoff_hz(case.system))
+        _harmonics.require_size(case.system, K, mu=case.mu)
+        self.settings = _harmonics.settings_for(case.system, K)
         self.problem = _problem_jit(self.family, self.theta, self.settings)
         self.system = self.problem.system
         self.has_backlash = self.system.has_backlash
@@ -196,7 +212,9 @@ def sensitivity(
     with the largest response); ``paths``: TOML paths (default: every continuous path
     that changes the gear's system, :func:`~gearjax.continuous_paths` of the gear);
     ``stage``, ``linear``: as ``sweep``;
-    ``harmonics``: K (default: the sweep's rule at ``at_hz``); ``fold_tol``: the fold
+    ``harmonics``: K (default: the sweep's rule at ``at_hz``; on a torus, ``G > 1``, the
+    same K on every angle, default the orders of
+    :func:`~gearjax._studies.harmonics.torus_orders_rule`); ``fold_tol``: the fold
     test on ``min |mu - 1|`` (:func:`~gearjax._studies.sensitivity.point_status`,
     :data:`~gearjax._studies.sensitivity.FOLD_TOL`).
 
@@ -229,7 +247,7 @@ def sensitivity(
                   response=response, unit=RESPONSE_UNITS[response], fold_tol=fold_tol,
                   mesh=gp.system.mesh_labels[j], value=float(values[j]), converged=converged,
                   paths=gp.paths, values=np.asarray(gp.theta),
-                  meshes=tuple(gp.system.mesh_labels), mesh_values=values)
+                  meshes=tuple(gp.system.mesh_labels), mesh_values=values, torus=gp.torus)
     refused = dict(derivative=None, normalised=None, partial=None)
     if not converged:
         return Sensitivity(**common, **refused, result=result_word(RESULTS.not_converged),
@@ -241,7 +259,7 @@ def sensitivity(
                                             fold_tol)
     status = dict(stable=stable, fold_distance=distance)
     try:
-        check_point(stable, distance, f"{at_hz:g} Hz", fold_tol)
+        check_point(stable, distance, f"{at_hz:g} Hz", fold_tol, torus=gp.torus is not None)
     except SensitivityRefused as e:
         return Sensitivity(**common, **refused, **status, result=e.result, message=str(e))
     d = np.asarray(pg.gradient)

@@ -5,6 +5,7 @@ solved from scratch."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import jax
 import jax.numpy as jnp
@@ -14,6 +15,7 @@ from ..._engine import aft as _aft
 from ..._engine import continuation as _continuation
 from ..._engine import hb as _hb
 from ..._engine import time_domain as _time_domain
+from ..._engine.floquet import return_turns
 from ..._engine.newton import newton_jit, solve_hb, solve_linear
 from ..._engine.results import RESULTS
 
@@ -51,7 +53,8 @@ def enter_segment(problem, previous, lam, omega_ref, guess=None):
             if bool(sol.converged):
                 return sol.y, sol.result, lam
             state = _time_domain.hb_initial_state(y.reshape(problem.shape) * problem.x_scale,
-                                                  lam * omega_ref, problem.settings.eta)
+                                                  lam * omega_ref, problem.settings.eta,
+                                                  problem.basis)
         return (*start_point(problem, lam * omega_ref, state), lam)
     K_old, y_old, lam_old, before = previous
     if before is not None and (before[1] - lam) * (lam_old - lam) < 0:
@@ -101,11 +104,11 @@ def settled_start(problem, omega, state=None) -> _hb.HBSolution:
     stable one, as a test rig's response settles after a jump), from ``state`` ``(x0,
     v0)`` or the static contact state (``time_domain.simulate``: Dopri8 at
     :data:`SETTLE_RTOL`, at most :data:`SETTLE_PERIODS` base periods; the last ``eta``
-    periods give the harmonics). A solver failure is returned as a
-    ``nonlinear_max_steps_reached`` solution at the linear guess, and so is every start
-    of a torus problem (``G > 1``: a quasi-periodic response settles to no period)."""
-    if problem.basis.G > 1:  # no period to settle to: the caller goes on without
-        return _failed(problem, omega)
+    periods give the harmonics; on a torus, whose response settles to no period, a
+    least-squares fit over many turns, :func:`_settled_on_torus`). A solver failure is
+    returned as a ``nonlinear_max_steps_reached`` solution at the linear guess."""
+    if problem.basis.G > 1:
+        return _settled_on_torus(problem, omega, state)
     K, eta = problem.settings.n_harmonics, problem.settings.eta
     settings = _time_domain.TimeDomain(
         rtol=SETTLE_RTOL, atol=SETTLE_RTOL, periodic_tol=100 * SETTLE_RTOL,
@@ -117,6 +120,39 @@ def settled_start(problem, omega, state=None) -> _hb.HBSolution:
     y = (X / problem.x_scale).reshape(-1)
     if not bool(tr.integrated) or not bool(jnp.all(jnp.isfinite(y))):
         return _failed(problem, omega)
+    return newton(problem, jnp.asarray(omega), y)
+
+
+def fit_turns(basis) -> int:
+    """Turns of the base angle a fit of torus coefficients to a time history spans
+    (:func:`_settled_on_torus`): the near return of the torus line
+    (:func:`gearjax._engine.floquet.return_turns`), and at least two cycles of the slowest
+    beat between two of the basis's frequencies (the closest pair of ``|k . rates|``,
+    zero included), which the fit must tell apart."""
+    nu = np.unique(np.abs(_aft.frequency_numbers(basis)))
+    beat = float(np.min(np.diff(nu))) if nu.size > 1 else 1.0
+    q, _ = return_turns(basis.rates)
+    return int(max(q, math.ceil(2.0 / max(beat, 1e-6))))
+
+
+def _settled_on_torus(problem, omega, state=None) -> _hb.HBSolution:
+    """:func:`settled_start` on a torus: integrate :data:`SETTLE_PERIODS` base periods
+    from ``state`` (or the static contact state), then fit the coefficients of the basis
+    by least squares to the motion sampled over :func:`fit_turns` more
+    (:func:`gearjax._engine.aft.line_analysis`: four samples per period of the highest
+    frequency and at least four per coefficient), then Newton."""
+    basis, system = problem.basis, problem.system
+    turns = fit_turns(basis)
+    top = float(np.max(np.abs(_aft.frequency_numbers(basis))))
+    count = max(4 * basis.n_coefficients, math.ceil(4 * top * turns))
+    tau = 2 * np.pi * (SETTLE_PERIODS + turns * np.arange(1, count + 1) / count)
+    x0, v0 = _time_domain.contact_state(system) if state is None else state
+    settings = _time_domain.TimeDomain(rtol=SETTLE_RTOL, atol=SETTLE_RTOL)
+    x, _, ok = _time_domain.sample_trajectory(system, omega, x0, v0, tau, settings)
+    if not bool(ok) or not bool(jnp.all(jnp.isfinite(x))):
+        return _failed(problem, omega)
+    X = _aft.line_analysis(basis, tau, np.asarray(x))
+    y = jnp.asarray((X / np.asarray(problem.x_scale)).reshape(-1))
     return newton(problem, jnp.asarray(omega), y)
 
 

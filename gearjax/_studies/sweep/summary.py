@@ -17,8 +17,8 @@ class SweepResult:
     ``folds_hz`` (located folds, reference-stage Hz), ``stop`` (why it ended),
     ``segments`` (``(from_hz, to_hz, K)`` in sweep order), ``seconds``, ``restarts``
     (``{"from_hz", "at_hz", "reason"}``: where a branch was left and the next begun),
-    ``branches`` (a completed sweep's ``{"branch", "found", "seed_hz", "stops"}``,
-    :mod:`~gearjax._studies.sweep.completion`)."""
+    ``branches`` (a completed sweep's ``{"branch", "found", "seed_hz", "stops", "eta"}``,
+    and a doubled branch's origin, :mod:`~gearjax._studies.sweep.completion`)."""
 
     dataset: object
     folds_hz: tuple[float, ...]
@@ -118,6 +118,23 @@ def coexisting_jumps(ds) -> list[dict]:
     return out
 
 
+QUASI_PERIODIC = ("a complex pair of Floquet multipliers crosses the unit circle; beyond "
+                  "it the motion is quasi-periodic (a torus), not a periodic branch: "
+                  "integrate in time there (gearjax simulate)")
+"""What a Neimark-Sacker bifurcation means for the sweep, in words."""
+
+
+def bifurcation_lines(notes: list[dict]) -> list[str]:
+    """The notes of :func:`bifurcation_notes` as lines to print: one per period doubling,
+    the Neimark-Sacker ones on one line."""
+    lines = [n["note"] for n in notes if n["kind"] != "neimark_sacker"]
+    ns = [n["mesh_frequency_hz"] for n in notes if n["kind"] == "neimark_sacker"]
+    if ns:
+        lines.append("Neimark-Sacker near " + ", ".join(f"{f:.1f}" for f in sorted(ns))
+                     + f" Hz: {QUASI_PERIODIC.replace('beyond it', 'beyond each')}")
+    return lines
+
+
 def bifurcation_notes(ds, branches=()) -> list[dict]:
     """What follows each period doubling and Neimark-Sacker bifurcation of the sweep
     ``ds`` (its ``bifurcations`` attribute), with the completed sweep's branch records
@@ -131,10 +148,7 @@ def bifurcation_notes(ds, branches=()) -> list[dict]:
         f, kind = float(b["mesh_frequency_hz"]), b.get("kind")
         if kind == "neimark_sacker":
             out.append({"mesh_frequency_hz": f, "kind": kind, "branch": None,
-                        "note": f"Neimark-Sacker near {f:.1f} Hz: a complex pair of Floquet "
-                                "multipliers crosses the unit circle; beyond it the motion "
-                                "is quasi-periodic (a torus), not a periodic branch: "
-                                "integrate in time there (gearjax simulate)"})
+                        "note": f"Neimark-Sacker near {f:.1f} Hz: {QUASI_PERIODIC}"})
             continue
         if kind != "period_doubling":
             continue
