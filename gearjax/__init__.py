@@ -96,7 +96,10 @@ from ._studies.harmonics import (
     TruncationWarning as TruncationWarning,
     excitation_floor as excitation_floor,
     harmonics_rule as harmonics_rule,
+    orders_floor as orders_floor,
     response_cutoff_hz as response_cutoff_hz,
+    settings_for as harmonics_settings,
+    torus_orders_rule as torus_orders_rule,
 )
 from ._gear.kinematics import Kinematics as Kinematics, kinematics as kinematics
 from ._gear.frequency_groups import (

@@ -14,6 +14,8 @@ import ast
 import importlib.metadata
 import json
 import pathlib
+import re
+import types
 
 import pytest
 
@@ -182,3 +184,15 @@ def test_benchmarks_and_notebooks_use_the_public_api(path):
 
 def test_version_comes_from_the_installed_distribution():
     assert gearjax.__version__ == importlib.metadata.version("gearjax")
+
+
+def test_every_public_name_has_an_api_page():
+    """The API reference (docs/api/*.md, mkdocstrings) lists every name gearjax exports,
+    and nothing it no longer exports."""
+    public = {n for n in dir(gearjax) if not n.startswith("_")
+              and not isinstance(getattr(gearjax, n), types.ModuleType)}
+    documented = set()
+    for page in (ROOT / "docs" / "api").glob("*.md"):
+        documented |= set(re.findall(r"^::: gearjax\.(\w+)", page.read_text(), re.M))
+    assert not public - documented, f"no API page lists {sorted(public - documented)}"
+    assert not documented - public, f"API pages list {sorted(documented - public)}"

@@ -51,6 +51,13 @@ Memory: a point holds a few dense ``N x N`` matrices (``N = (2K + 1) n``, 53 MB 
 point at K = 32 on the paper train), so only as many points as fit in
 ``memory_bytes`` are solved at once (:func:`chunks`); the rest follow in sequence in the
 same compiled call.
+
+Quasi-periodic gears. Where a gear's mesh frequencies fall in ``G > 1`` incommensurate
+groups, :func:`design_sweep` solves the torus harmonic balance (model.md,
+"Incommensurate stages"): the family carries the gear's torus layout, ``K`` is a tuple
+of orders per angle (``harmonics`` on every angle, or each angle's excitation floor),
+and ``N = (2P + 1) n`` for the ``P`` wave vectors of the truncation set. Every solver
+above is generic over the basis.
 """
 
 from __future__ import annotations
@@ -65,13 +72,14 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from jaxtyping import Array, Float
 
+from .._engine import aft as _aft
 from .._engine import hb as _hb
 from .._engine.results import RESULTS, result_word
 from .._engine.adjoint import implicit_coefficients
 from .._engine.newton import solve_hb
 from .._engine.responses import mesh_responses, static_mesh_forces
 from .._errors import bad_argument
-from .._gear.case import gear_case
+from .._gear.case import gear_case, torus_fields
 from .._gear.train import Train
 from . import harmonics as _harmonics
 from .sensitivity import GearFamily, check_paths
@@ -128,9 +136,16 @@ a few dense ``N x N`` matrices (Jacobian, its factors, the Kronecker blocks)."""
 
 
 def point_bytes(settings: _hb.HarmonicBalance, n_dof: int) -> int:
-    """Rough memory of one point in flight (bytes): ``64 N^2``, ``N = (2K + 1) n``
-    (eight dense float64 ``N x N`` arrays)."""
-    N = (2 * settings.n_harmonics + 1) * n_dof
+    """Rough memory of one point in flight (bytes): ``64 N^2``, ``N = C n`` with ``C =
+    2K + 1`` coefficient rows (``2P + 1`` for the ``P`` wave vectors of a torus
+    truncation set, orders ``K`` a tuple) (eight dense float64 ``N x N`` arrays)."""
+    K = settings.n_harmonics
+    if isinstance(K, tuple):
+        C = _aft.torus_basis(K, [2 * k + 2 for k in K], (1.0,) * len(K),
+                             settings.truncation).n_coefficients
+    else:
+        C = 2 * K + 1
+    N = C * n_dof
     return 64 * N * N
 
 
@@ -277,8 +292,10 @@ class DesignSweep:
     ``(B, F)`` words (:func:`~gearjax._engine.results.result_word`); ``converged``
     ``(B, F)``; ``peak`` ``(B,)``: the largest RMS over
     converged points and meshes (N); ``meshes`` (names); ``gear``, ``reference_stage``,
-    ``harmonics``, ``linear``, ``solver``, ``devices`` (how many the designs were
-    spread over).
+    ``harmonics`` (K; on a torus the orders per angle, a tuple), ``linear``,
+    ``solver``, ``devices`` (how many the designs were spread over); ``torus``: what a
+    torus study solves (:func:`~gearjax._gear.case.torus_fields`), ``None`` for a
+    periodic gear (``omega`` is then the base of torus angle 0).
     """
 
     paths: tuple[str, ...]
@@ -292,10 +309,11 @@ class DesignSweep:
     meshes: tuple[str, ...]
     gear: str
     reference_stage: str
-    harmonics: int
+    harmonics: int | tuple[int, ...]
     linear: bool
     solver: str
     devices: int
+    torus: dict | None = None
 
 
 def design_sweep(
@@ -318,7 +336,9 @@ def design_sweep(
     units); ``frequencies_hz``: reference-stage mesh frequencies (Hz); ``stage``: the
     reference stage (default: the first turning one); ``linear``: drop the backlash
     (default: the linear, time-varying model); ``harmonics``: K (default: the highest
-    excitation order, so every stiffness harmonic is resolved); ``solver``: module
+    excitation order, so every stiffness harmonic is resolved; on a torus, ``G > 1``,
+    ``harmonics`` on every angle, default each angle's highest excitation order,
+    :func:`~gearjax._studies.harmonics.orders_floor`); ``solver``: module
     docstring; ``devices``: shard the designs (module docstring).
 
     **Returns:** :class:`DesignSweep`. One compilation per batch size, frequency count
@@ -326,7 +346,7 @@ def design_sweep(
     ``paths``, ``thetas``, ``frequencies_hz`` or ``solver``; ``TrainError`` for bad
     harmonics, and as :func:`~gearjax._gear.case.gear_case` for the gear and stage.
     """
-    case = gear_case(train, gear, stage, linear)
+    case = gear_case(train, gear, stage, linear, torus=True)
     leaves = check_paths(train, paths)
     paths = tuple(leaf.path for leaf in leaves)
     th = np.asarray(thetas, dtype=float)
@@ -336,14 +356,12 @@ def design_sweep(
     f = np.asarray(frequencies_hz, dtype=float).reshape(-1)
     if f.size < 1 or not np.all(np.isfinite(f)) or np.any(f <= 0):
         raise bad_argument("frequencies_hz", f.tolist(), "must be positive frequencies in Hz")
-    family = GearFamily.of(train, paths, case.gear.name, linear)
+    family = GearFamily.of(train, paths, case.gear.name, linear, case.layout)
     nominal = case.system
-    if harmonics is None:
-        harmonics = _harmonics.excitation_floor(nominal)
-    _harmonics.require_harmonics(nominal, harmonics)
-    _harmonics.require_size(nominal, int(harmonics), mu=case.mu)
+    K = orders_of(nominal, harmonics)
+    _harmonics.require_size(nominal, K, mu=case.mu)
     solver = resolve_solver(solver, nominal)
-    settings = _hb.HarmonicBalance(n_harmonics=int(harmonics))
+    settings = _harmonics.settings_for(nominal, K)
     omegas = case.omega(f)
     rms, code = batched_rms(family, th, omegas, settings, solver=solver, devices=devices)
     rms, ok, code = np.asarray(rms), np.asarray(code == RESULTS.successful), result_word(code)
@@ -353,8 +371,20 @@ def design_sweep(
     return DesignSweep(paths=paths, thetas=th, frequencies_hz=f, omega=np.asarray(omegas),
                        rms_force=rms, result=code, converged=ok, peak=peak_of(rms),
                        meshes=tuple(nominal.mesh_labels), gear=case.gear.name,
-                       reference_stage=case.stage,
-                       harmonics=int(harmonics), linear=linear, solver=solver, devices=n_dev)
+                       reference_stage=case.stage, harmonics=K, linear=linear,
+                       solver=solver, devices=n_dev, torus=torus_fields(case))
+
+
+def orders_of(system, harmonics: int | None):
+    """The orders ``K`` of a batched design study on ``system``: ``harmonics`` (on every
+    torus angle where ``G > 1``: a tuple), default the excitation floor
+    (:func:`~gearjax._studies.harmonics.orders_floor`: an ``int``, or each angle's floor).
+
+    **Raises:** ``ArgumentError`` naming ``harmonics`` below the floor."""
+    if harmonics is None:
+        return _harmonics.orders_floor(system)
+    _harmonics.require_harmonics(system, harmonics)
+    return (int(harmonics),) * system.n_angles if system.n_angles > 1 else int(harmonics)
 
 
 def resolve_solver(solver: str, system) -> str:

@@ -116,18 +116,34 @@ def settings_for(system: System, K, **fields) -> _hb.HarmonicBalance:
     return _hb.HarmonicBalance(n_harmonics=K, **fields)
 
 
+MAX_INITIAL_COEFFICIENTS = 256
+"""Cap on the coefficient rows of the first choice of torus orders (a cost bound, as
+:data:`MAX_INITIAL` for a periodic balance, whose cap is ``2 MAX_INITIAL + 1 = 129``
+rows): over it, the order of the angle furthest above its floor comes down first. The
+truncation check raises an angle's order beyond it where the estimate asks for more."""
+
+
 def torus_orders_rule(system: System, omega: float, *, cutoff_hz: float) -> tuple[int, ...]:
     """First choice of the orders ``K_g`` at base frequency ``omega`` (rad/s) on a torus:
     per angle ``g`` of base frequency ``angle_ratio[g] omega / (2 pi)`` Hz, enough orders
     to reach ``cutoff_hz``, rounded up to a step of half the angle's floor
-    (:func:`orders_floor`), at least the floor and at most twice it."""
-    out = []
-    for floor, ratio in zip(orders_floor(system), system.angle_ratio):
+    (:func:`orders_floor`), at least the floor and at most twice it; then, while the set
+    has more than :data:`MAX_INITIAL_COEFFICIENTS` rows, the order furthest above its
+    floor (relative to it) comes down a step."""
+    floors = orders_floor(system)
+    steps = [max(1, floor // 2) for floor in floors]
+    K = []
+    for floor, step, ratio in zip(floors, steps, system.angle_ratio):
         base = max(ratio * omega / (2 * math.pi), 1e-9)
-        step = max(1, floor // 2)
         k = step * math.ceil(cutoff_hz / base / step)
-        out.append(int(min(max(k, floor), 2 * floor)))
-    return tuple(out)
+        K.append(int(min(max(k, floor), 2 * floor)))
+    while coefficient_count(system, tuple(K)) > MAX_INITIAL_COEFFICIENTS:
+        above = [(K[g] / floors[g], g) for g in range(len(K)) if K[g] > floors[g]]
+        if not above:
+            break
+        g = max(above)[1]
+        K[g] = max(floors[g], K[g] - steps[g])
+    return tuple(K)
 
 
 def widened(K, g: int):

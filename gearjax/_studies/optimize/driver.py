@@ -9,6 +9,13 @@ are solved by the linear, time-varying harmonic balance (:mod:`.screen`), and th
 (:mod:`.nonlinear`). The incumbent (the current design) is always a candidate, so no step
 makes the objective worse on the model that decides it; ties go to the better-balanced
 planet set, then to the incumbent (:mod:`.ranking`).
+
+A gear whose mesh frequencies fall in ``G > 1`` incommensurate groups is optimised on its
+torus (model.md, "Incommensurate stages"): the proxy sums the tones of every angle, the
+linear screen is the torus harmonic balance at each angle's excitation floor (or
+``harmonics`` on every angle), the sweeps with backlash are the sweep's torus
+continuation, and each group's first stage phase is an origin, not a variable
+(:func:`.variables.phase_origins`).
 """
 
 from __future__ import annotations
@@ -20,8 +27,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from ..._engine import hb as _hb
-from ..._gear.case import gear_case
+from ..._gear.case import gear_case, torus_fields
 from ..._gear.paths import get_path
 from ..._gear.planet_sets import (
     admissible_planet_sets,
@@ -31,7 +37,7 @@ from ..._gear.planet_sets import (
 )
 from ..._gear.train import Train
 from .. import harmonics as _harmonics
-from ..design import peak_of
+from ..design import orders_of, peak_of
 from .nonlinear import NonlinearBand, nonlinear_band
 from .proxy import proxy_screen
 from .ranking import RANK_RTOL, band_profile, leximax_order
@@ -52,7 +58,8 @@ class StageStudy:
     **Fields:** ``gear``; ``paths``: the design vector's TOML paths; ``screen``: the
     models over it (:class:`.screen.Screen`); ``settings``; ``mesh_stage`` ``(m,)``: the
     stage id of every mesh; ``sweep_band(train)``: the band swept with backlash
-    (:class:`.nonlinear.NonlinearBand`); ``say(message)``: progress.
+    (:class:`.nonlinear.NonlinearBand`); ``say(message)``: progress; ``layout``: the
+    gear's torus layout (``None``: periodic).
     """
 
     gear: str
@@ -62,6 +69,7 @@ class StageStudy:
     mesh_stage: np.ndarray
     sweep_band: Callable[[Train], NonlinearBand]
     say: Callable[[str], None]
+    layout: object = None
 
 
 def optimize(
@@ -91,24 +99,25 @@ def optimize(
     """
     t_start = time.perf_counter()
     say = progress or (lambda message: None)
-    case = gear_case(train, gear, stage, linear=not settings.nonlinear)
+    case = gear_case(train, gear, stage, linear=not settings.nonlinear, torus=True)
     g, ref, mu_ref, nominal = case.gear, case.stage, case.mu_ref, case.system
     lo, hi = check_band(band_hz)
     check_settings(settings)
     variables = phasing_variables(train, g.name, vary)
     paths = tuple(p for v in variables for p in v.paths)
-    K = settings.harmonics or _harmonics.excitation_floor(nominal)
-    for k in {int(K), int(settings.nonlinear_harmonics or K)}:
-        _harmonics.require_harmonics(nominal, k)
+    K = orders_of(nominal, settings.harmonics)  # a tuple of orders per angle on a torus
+    # the sweeps take one K for every angle
+    K_nl = settings.nonlinear_harmonics or (max(K) if isinstance(K, tuple) else K)
+    for k in dict.fromkeys([K, (int(K_nl),) * case.G if case.G > 1 else int(K_nl)]):
+        _harmonics.require_harmonics(nominal, max(k) if isinstance(k, tuple) else k)
         _harmonics.require_size(nominal, k, mu=case.mu)
-    hb_settings = _hb.HarmonicBalance(n_harmonics=int(K))
+    hb_settings = _harmonics.settings_for(nominal, K)
     n_peaks = settings.screen_points // 2
     f_shared = np.geomspace(lo, hi, settings.screen_points - n_peaks)
     f_proxy = np.geomspace(lo, hi, settings.proxy_points)
     screen = Screen(train, g.name, paths, f_proxy, f_shared, n_peaks, case.omega, hb_settings,
-                    settings.devices, settings.screen + 1)
+                    settings.devices, settings.screen + 1, layout=case.layout)
     groups = np.asarray(nominal.mesh_group)
-    K_nl = settings.nonlinear_harmonics or int(K)
 
     def sweep_band(t):
         return nonlinear_band(t, g.name, lo, hi, stage=ref, harmonics=K_nl,
@@ -117,10 +126,13 @@ def optimize(
                               progress=say)
 
     study = StageStudy(gear=g.name, paths=paths, screen=screen, settings=settings,
-                       mesh_stage=groups, sweep_band=sweep_band, say=say)
+                       mesh_stage=groups, sweep_band=sweep_band, say=say, layout=case.layout)
+    torus = (f"; {case.G} incommensurate frequency groups: the torus harmonic balance"
+             if case.G > 1 else "")
     say(f"optimize: gear {g.name!r}, band {lo:g}-{hi:g} Hz (stage {ref}), varying "
-        f"{', '.join(n for v in variables for n in v.names)}; linear screen K = {K}, "
-        f"{settings.screen_points} frequencies per candidate")
+        f"{', '.join(n for v in variables for n in v.names)}; linear screen K = "
+        f"{_harmonics.orders_text(K)}, {settings.screen_points} frequencies per candidate"
+        + torus)
     base_nl = None
     if settings.nonlinear:
         say("optimize: baseline, sweeps with backlash")
@@ -136,7 +148,7 @@ def optimize(
     relaxation, relaxed_theta = None, None
     theta_opt = theta_of(current, paths)
     # where the linear peaks of any phasing sit: in the relaxation's grid and the common one
-    f_res = resonance_frequencies(nominal, screen.fo.orders, mu_ref, lo, hi)
+    f_res = resonance_frequencies(nominal, screen.fo.tone_rates, mu_ref, lo, hi)
     if settings.relax_iterations:
         f_relax = np.unique(np.concatenate([f_res, screen.grids(theta_opt[None])[0]]))
         say(f"optimize: continuous relaxation (L-BFGS on the linear model at {f_relax.size} "
@@ -176,7 +188,7 @@ def optimize(
         frequencies_hz=f_final, meshes=tuple(nominal.mesh_labels),
         mesh_stage=tuple(nominal.mesh_group), mesh_side=tuple(nominal.mesh_side),
         mesh_planet=tuple(nominal.mesh_planet), settings=settings,
-        seconds=time.perf_counter() - t_start)
+        seconds=time.perf_counter() - t_start, harmonics=K, torus=torus_fields(case))
 
 
 def _design(study: StageStudy, variables, t: Train, rms, nl) -> Design:
@@ -237,7 +249,8 @@ def _proxy_ranking(study: StageStudy, current: Train, v: StageVariables) -> _Pro
     t0 = time.perf_counter()
     proxy = proxy_screen(current, study.gear, sid, sets, gammas,
                          study.screen.to_omega(study.screen.f_proxy), everywhere,
-                         settings.chunk, stage_phases_deg=phases if v.stage_phase else None)
+                         settings.chunk, stage_phases_deg=phases if v.stage_phase else None,
+                         layout=study.layout)
     proxy = proxy.reshape(len(sets), len(gammas) * len(phases), -1)  # (S, G P, depth)
     best_g = np.asarray([leximax_order(p)[0] for p in proxy])
     proxy_best = proxy[np.arange(len(sets)), best_g]  # (S, depth)

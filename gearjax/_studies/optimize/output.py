@@ -39,7 +39,9 @@ def _design_json(d: Design) -> dict:
 def optimize_json(result: OptimizeResult) -> dict:
     """The ``optimize`` JSON: ``baseline``, ``optimum`` (values, peaks), ``improvement``
     (optimum / baseline peak, linear and with backlash), ``relaxation``, ``stages``,
-    ``candidates`` (those solved by the linear harmonic balance), settings."""
+    ``candidates`` (those solved by the linear harmonic balance), settings;
+    ``harmonics``: K of the linear screen (on a torus the list of orders per angle) and
+    ``torus``: what a torus study solved (null for a periodic gear)."""
     b, o = result.baseline, result.optimum
     ratio = lambda x, y: (x / y) if (y and np.isfinite(x) and np.isfinite(y)) else None
     cand = result.candidates
@@ -69,7 +71,14 @@ def optimize_json(result: OptimizeResult) -> dict:
         "candidates": rows,
         "settings": settings_dict(result.settings),
         "seconds": result.seconds,
+        "harmonics": _orders_json(result.harmonics),
+        "torus": result.torus,
     }
+
+
+def _orders_json(K):
+    """K as JSON: an int, or on a torus the list of orders per angle."""
+    return list(K) if isinstance(K, tuple) else K
 
 
 def optimize_frame(result: OptimizeResult):
@@ -118,8 +127,10 @@ def optimize_dataset(result: OptimizeResult, attrs: dict | None = None):
     ``gear``, ``reference_stage``, ``band_hz``, ``vary``, the peaks
     (``baseline_peak_linear``, ``optimum_peak_linear``, ``baseline_peak_nonlinear``,
     ``optimum_peak_nonlinear``, ``relaxed_peak_linear``; NaN where not computed), the
-    values (JSON), ``stages``, ``settings``, ``train_toml`` (the optimum),
-    ``baseline_train_toml``, ``gearjax_version``, ``created``.
+    values (JSON), ``stages``, ``settings``, ``harmonics`` (the linear screen's K; JSON
+    list of orders on a torus), ``torus`` (JSON; ``null`` for a periodic gear),
+    ``train_toml`` (the optimum), ``baseline_train_toml``, ``gearjax_version``,
+    ``created``.
     """
     c = result.candidates
     r = result.relaxation
@@ -185,6 +196,8 @@ def optimize_dataset(result: OptimizeResult, attrs: dict | None = None):
         "relaxed_values": {} if r is None else r.values,
         "stages": result.stages,
         "settings": settings_dict(result.settings),
+        "harmonics": _orders_json(result.harmonics),
+        "torus": result.torus,
         "train_toml": dumps_train(result.train),
         "baseline_train_toml": dumps_train(result.baseline_train),
         "gearjax_version": __version__,

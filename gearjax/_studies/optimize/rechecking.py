@@ -72,7 +72,15 @@ def band_peak(ds, max_dlf: float = MAX_DLF) -> tuple[float, float, str, int]:
 def point_state(ds, i: int):
     """``(x0, v0)`` ``(n,)``: the state at ``t = 0`` of point ``i`` of a sweep Dataset
     (its ``displacement_cos`` / ``displacement_sin`` harmonics), to start an integration
-    on that orbit (:func:`~gearjax.hb_initial_state`)."""
+    on that orbit (:func:`~gearjax.hb_initial_state`). On a torus (coordinate
+    ``wave_vector``) ``x(t) = sum_k cos_k cos(nu_k Omega t) + sin_k sin(nu_k Omega t)``
+    with ``nu_k`` the ``wave_frequency``: ``x0 = sum_k cos_k``, ``v0 = Omega sum_k nu_k
+    sin_k``, a state on the torus solution for the windowed integration."""
+    if "wave_vector" in ds.coords:
+        cos = np.asarray(ds["displacement_cos"].values[i], dtype=float)  # (n, waves)
+        sin = np.asarray(ds["displacement_sin"].values[i], dtype=float)
+        nu = np.asarray(ds["wave_frequency"].values, dtype=float)
+        return cos.sum(axis=1), float(ds["omega"].values[i]) * (sin @ nu)
     X = displacement_coefficients(ds, i)
     eta = (ds["eta"].values[i] if "eta" in ds.variables  # per point: a doubled branch's 2
            else json_solver(ds).get("eta", 1))
@@ -136,7 +144,10 @@ def recheck(
     (:func:`band_peak`); (2) time integration (diffrax) started from the sweep's peak
     orbit: a stable orbit is what the integration settles on, with the same RMS; (3)
     :func:`gearjax.verify_gear` at ``verify_hz`` (default: the fresh peak frequencies of
-    both designs), the harmonic balance solved afresh there and integrated.
+    both designs), the harmonic balance solved afresh there and integrated. On a torus
+    (``G > 1`` incommensurate groups) the sweeps are torus continuations and both
+    integrations are windowed ones (:func:`gearjax.simulate_gear`,
+    :func:`gearjax.verify_gear`).
 
     **Returns:** :class:`Recheck` (tables ``peaks`` and ``points``). **Raises:**
     ``ArgumentError`` naming ``band_hz`` for a bad band; ``ValueError`` for a

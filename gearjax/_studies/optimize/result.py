@@ -51,7 +51,10 @@ class OptimizeResult:
     ``nonlinear_coverage``, ``incumbent``, ``selected``; NaN where a model was not run);
     ``stages``: per stage, what was enumerated and chosen; ``frequencies_hz`` ``(F,)``:
     the common grid of the designs' ``linear_rms`` (Hz); ``meshes``, ``mesh_stage``, ``mesh_side``, ``mesh_planet``;
-    ``settings``; ``seconds``; ``converged``: the optimum has converged points.
+    ``settings``; ``seconds``; ``converged``: the optimum has converged points;
+    ``harmonics``: K of the linear screen (an ``int``, or on a torus the orders per
+    angle, a tuple); ``torus``: what a torus study solves
+    (:func:`~gearjax._gear.case.torus_fields`; ``None`` for a periodic gear).
     """
 
     gear: str
@@ -73,6 +76,8 @@ class OptimizeResult:
     mesh_planet: tuple[int, ...]
     settings: OptimizeSettings
     seconds: float
+    harmonics: int | tuple[int, ...] | None = None
+    torus: dict | None = None
 
     @property
     def converged(self) -> bool:

@@ -31,12 +31,15 @@ class Screen:
     proxy peaks are added to it; ``to_omega(f_hz)``: reference-stage mesh frequency (Hz)
     to base frequency (rad/s); ``hb_settings``: the linear harmonic balance
     (:class:`~gearjax.HarmonicBalance`); ``devices``: shard the designs across these
-    (:mod:`gearjax._studies.design`); ``batch``: designs per call of :meth:`rms`.
+    (:mod:`gearjax._studies.design`); ``batch``: designs per call of :meth:`rms`;
+    ``layout``: the gear's torus layout (``GearCase.layout``; ``None``: its periodic
+    system), and ``hb_settings`` then holds orders per torus angle.
     """
 
     def __init__(self, train: Train, gear: str, paths, f_proxy, f_shared, n_peaks: int,
-                 to_omega: Callable, hb_settings: _hb.HarmonicBalance, devices, batch: int):
-        self.family = GearFamily.of(train, paths, gear, linear=True)
+                 to_omega: Callable, hb_settings: _hb.HarmonicBalance, devices, batch: int,
+                 layout=None):
+        self.family = GearFamily.of(train, paths, gear, linear=True, layout=layout)
         self.fo = first_order(self.family(self.family.theta()), to_omega(f_proxy))
         self.f_proxy = np.asarray(f_proxy)
         self.f_shared = np.asarray(f_shared)
@@ -101,7 +104,8 @@ def resonance_frequencies(system, orders, mu_ref: int, lo: float, hi: float) -> 
     """Reference-stage mesh frequencies (Hz) in ``[lo, hi]`` where an excitation of base
     order ``o`` meets an elastic natural frequency ``f_k`` of the mean-stiffness model,
     ``mu_ref f_k / o``: where every linear peak of every phasing sits (the phasing
-    changes how hard a mode is driven, not where), sorted."""
+    changes how hard a mode is driven, not where), sorted. On a torus ``orders`` are the
+    tones' frequencies over Omega (:attr:`.proxy.FirstOrder.tone_rates`, floats)."""
     hz = np.asarray([m.hz for m in modes(system).modes if m.cls == "elastic"], dtype=float)
     f = np.asarray([mu_ref * fk / o for fk in np.unique(np.round(hz, 6)) for o in orders
                     if o > 0], dtype=float)

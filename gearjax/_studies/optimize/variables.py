@@ -7,6 +7,12 @@ sets), ``STAGE.sun_ring_phase_deg`` and ``STAGE.stage_phase_deg`` (continuous, 3
 one mesh cycle). The first turning stage's stage phase is the time origin (shifting it
 shifts time) and is not a variable. The design vector holds, stage by stage in file
 order, planet angles 2..N of a varied set, then the varied phases (deg).
+
+On a torus (a gear whose mesh frequencies fall in ``G > 1`` incommensurate groups,
+model.md) each angle has its own origin: the first turning stage of each frequency
+group (:func:`phase_origins`). A torus average takes every relative phase of
+incommensurate angles, so shifting a whole angle changes no response; only stage phases
+relative to another stage of the same group are variables.
 """
 
 from __future__ import annotations
@@ -17,7 +23,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..._errors import bad_argument
-from ..._gear.kinematics import kinematics, require_base
+from ..._gear.frequency_groups import gear_frequency_groups, torus_layout
+from ..._gear.kinematics import Kinematics, kinematics, require_base
 from ..._gear.paths import get_path, leaf_selector, set_path
 from ..._gear.train import Train
 
@@ -55,13 +62,37 @@ class StageVariables:
         return tuple(f"{self.stage}.{k}" for k in keys)
 
 
+def phase_origins(train: Train, kin: Kinematics) -> dict[str, int]:
+    """``{stage id: torus angle}`` of the stages whose stage phase is an origin: the first
+    turning stage (a periodic gear, angle 0), or on a torus the first turning stage of
+    each frequency group (:func:`~gearjax.gear_frequency_groups`). Empty where no stage
+    turns.
+
+    **Raises:** ``TrainError`` as :func:`~gearjax.gear_frequency_groups`."""
+    turning = [s.id for s in kin.stages if s.turning]
+    if not turning:
+        return {}
+    groups = gear_frequency_groups(kin, train.source)
+    if groups.G == 1:
+        return {turning[0]: 0}
+    layout = torus_layout(kin, groups)
+    out: dict[str, int] = {}
+    for sid in turning:
+        angle = layout.stage[sid][0]
+        if angle not in out.values():
+            out[sid] = angle
+    return out
+
+
 def default_vary(train: Train, gear: str | None = None) -> list[str]:
     """Every phasing variable of the stages that turn in ``gear``: planet sets (2 or more
-    planets), sun-ring phases, and the stage phases of all but the time-origin stage."""
+    planets), sun-ring phases, and the stage phases of all but the time-origin stage (on
+    a torus: of every stage but each frequency group's first, :func:`phase_origins`)."""
     g = train.gear(gear)
     kin = kinematics(train, g.name)
-    require_base(kin, train.source)
-    origin = next(s.id for s in kin.stages if s.turning)
+    origins = phase_origins(train, kin)
+    if not origins:
+        require_base(kin, train.source)  # no turning mesh: says so
     out = []
     for s, sk in zip(train.stages, kin.stages):
         if not sk.turning:
@@ -69,7 +100,7 @@ def default_vary(train: Train, gear: str | None = None) -> list[str]:
         if s.n_planets >= 2:
             out.append(f"{s.id}.planet_angles_deg")
         out.append(f"{s.id}.sun_ring_phase_deg")
-        if s.id != origin:
+        if s.id not in origins:
             out.append(f"{s.id}.stage_phase_deg")
     return out
 
@@ -83,7 +114,7 @@ def phasing_variables(train: Train, gear: str, vary: Sequence[str] | None
     path that names no value of the train, the rule of :func:`gearjax.get_path`).
     """
     kin = kinematics(train, gear)
-    origin = next((s.id for s in kin.stages if s.turning), None)
+    origins = phase_origins(train, kin)
     vary = default_vary(train, gear) if vary is None else (
         [vary] if isinstance(vary, str) else list(vary))
     if not vary:
@@ -112,10 +143,17 @@ def phasing_variables(train: Train, gear: str, vary: Sequence[str] | None
         if key == "planet_angles_deg" and s.n_planets < 2:
             raise bad_argument("vary", path, f"stage {sid!r} has one planet, at 0 deg: there "
                                "is no planet set to choose")
-        if key == "stage_phase_deg" and sid == origin:
+        if key == "stage_phase_deg" and sid in origins and len(origins) == 1:
             raise bad_argument("vary", path, f"stage {sid!r} is the first turning stage: its "
                                "phase is the time origin (shifting it shifts time and changes "
                                "no RMS); vary the other stages' stage_phase_deg")
+        if key == "stage_phase_deg" and sid in origins:
+            raise bad_argument("vary", path, f"stage {sid!r} is the first turning stage of "
+                               f"frequency group {origins[sid]} (torus angle {origins[sid]}): "
+                               "its phase is that angle's origin, and the torus average "
+                               "takes every relative phase of incommensurate angles, so "
+                               "shifting it changes no RMS; vary the stage_phase_deg of a "
+                               "stage that shares its frequency group")
         if key in chosen.setdefault(sid, set()):
             raise bad_argument("vary", path, "the variable is given twice; name each once")
         chosen[sid].add(key)

@@ -120,7 +120,11 @@ def sweep(
             raise bad_argument("eta", eta, f"the gear's mesh frequencies fall in {case.G} "
                                "incommensurate groups: its response is quasi-periodic, and "
                                "sub-harmonic (eta > 1) solutions are periodic ones")
-        complete = False  # the completion's seeds are periodic orbits (G = 1 only)
+        if seeds:
+            raise bad_argument("seeds", seeds, f"the gear's mesh frequencies fall in "
+                               f"{case.G} incommensurate groups: integration seeds are the "
+                               "end states of periodic integration sweeps; a quasi-periodic "
+                               "gear is completed from the band's far end and the jumps")
     min_k = _harmonics.excitation_floor(system, eta)
     if harmonics is not None:
         _harmonics.require_harmonics(system, harmonics, eta)

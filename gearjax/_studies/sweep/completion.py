@@ -378,12 +378,15 @@ def jump_seeds(ctx, plan, pieces) -> list[Seed]:
         stable = np.concatenate([_ordered(p, p.rows["stable"]) for p in parts]) == 1
         mult = np.concatenate([_ordered(p, p.rows["max_multiplier"]) for p in parts])
         X = [x for p in parts for x in _ordered(p, p.rows["X"])]
+        Ks = [p.K for p in parts for _ in p.pts]
+        # a point past the runaway bound is no stable state a rig settles to
+        stable &= ~np.array([_walk.exceeds(ctx.system, x, ctx.runaway) for x in X], dtype=bool)
         for i in range(len(lam) - 1):
             for last, step in ((i, 1), (i + 1, -1)):
                 nxt = last + step
                 if not (stable[last] and not stable[nxt]):
                     continue
-                seed = _jump(ctx, plan, lam, mult, X, last, step, parts[0].eta)
+                seed = _jump(ctx, plan, lam, mult, X, last, step, parts[0].eta, Ks[last])
                 if seed is not None:
                     out.append(seed)
     return out
@@ -394,7 +397,7 @@ def _ordered(piece, values):
     return values[::-1] if piece.reverse else values
 
 
-def _jump(ctx, plan, lam, mult, X, last, step, eta) -> Seed | None:
+def _jump(ctx, plan, lam, mult, X, last, step, eta, K_last=None) -> Seed | None:
     """The jump from point ``last`` (stable) of a branch whose next point, going by
     ``step`` (+1/-1 along it), is not stable: the landing frequency is the first point
     beyond with a multiplier of at least :data:`JUMP_MULTIPLIER` while the frequency
@@ -424,7 +427,9 @@ def _jump(ctx, plan, lam, mult, X, last, step, eta) -> Seed | None:
     K = plan[s][2]
     problem = ctx.problem(K)
     omega = ctx.omega(land)
-    state = _time_domain.hb_initial_state(jnp.asarray(X[last]), ctx.omega(f[last]), eta)
+    # a torus solution's state needs its basis (eta = 1 there); a periodic one's does not
+    basis = ctx.problem(K_last).basis if ctx.system.n_angles > 1 else None
+    state = _time_domain.hb_initial_state(jnp.asarray(X[last]), ctx.omega(f[last]), eta, basis)
     sol = _starts.settled_start(problem, omega, state)
     if not bool(sol.converged):
         return None

@@ -10,12 +10,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._engine.results import legacy_words
+from ..._engine.results import RESULTS, legacy_words, result_word
 from ..._io.results import (add_displacement_harmonics, add_displacement_waves,
                                mesh_coordinates, sweep_dataset)
 from .. import harmonics as _harmonics
 from .completion import piece_rows
 from .post import bifurcations, point_rows
+from .walk import exceeds
 
 
 def point_data(walk, log, post, ctx, F_static, *, linear: bool, pieces=None) -> dict:
@@ -56,6 +57,12 @@ def point_data(walk, log, post, ctx, F_static, *, linear: bool, pieces=None) -> 
     data = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]
             if k not in ("responses", "X")}
     data["X"] = [X for r in rows for X in r["X"]]
+    # a point past the runaway bound (the first of a restarted branch, or the last of one
+    # that ran away) is no state to sign: flagged, its stability unknown
+    over = np.array([exceeds(ctx.system, X, ctx.runaway) for X in data["X"]], dtype=bool)
+    if over.any():
+        data["result"] = np.where(over, result_word(RESULTS.runaway), data["result"])
+        data["stable"] = np.where(over, np.nan, np.asarray(data["stable"], dtype=float))
     data["responses"] = jax.tree.map(lambda *a: np.concatenate(a),
                                      *[r["responses"] for r in rows])
     return data

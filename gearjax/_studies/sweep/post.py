@@ -169,7 +169,8 @@ def bifurcations(f_hz, stable, multipliers, excluded, branch=None, torus: bool =
     is ``None`` (a stability change) there.
     """
     out = []
-    change = np.asarray(stable[1:]) != np.asarray(stable[:-1])
+    stable = np.asarray(stable, dtype=float)  # NaN: unknown (e.g. a runaway point)
+    change = (stable[1:] != stable[:-1]) & np.isfinite(stable[1:]) & np.isfinite(stable[:-1])
     if branch is not None:
         change &= np.asarray(branch[1:]) == np.asarray(branch[:-1])
     for i in np.flatnonzero(change):

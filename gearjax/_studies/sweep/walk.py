@@ -11,7 +11,10 @@ absurd amplitudes (``runaway``, :data:`RUNAWAY`), or cannot go on
 (``step_too_small``, ``nonfinite``), the sweep keeps every point of it and starts a
 new branch a quarter of the largest step beyond that furthest frequency, as a sweep
 on a test rig jumps (:func:`gearjax._studies.sweep.starts.enter_segment`). Where no
-start converges the gap doubles with each try.
+start converges, or the start lands past the runaway bound (inside a parametric
+instability every periodic orbit does), the gap doubles with each try. A point past the
+runaway bound is kept but flagged (result ``runaway``, stability unknown: a truncated
+balance cannot resolve such impacts, :func:`~gearjax._studies.sweep.dataset.point_data`).
 """
 
 from __future__ import annotations
@@ -168,7 +171,11 @@ def walk_segment(ctx, walk, log, post, *, progress=None, entered=None, key=None,
         far = max(pts, key=lambda p: p["lam"] * direction)
         walk.furthest = (K, far["y"], far["lam"])
     result = result_from_word(seg_stop)
-    walk.failed = walk.failed + 1 if bool(result == RESULTS.no_converged_start) else 0
+    # a fresh branch that runs away at its start found no state either: the gap doubles
+    landed_away = (bool(result == RESULTS.runaway) and j in walk.fresh and bool(pts)
+                   and ran_away(problem, pts[0]["y"], ctx.runaway))
+    failed = bool(result == RESULTS.no_converged_start) or landed_away
+    walk.failed = walk.failed + 1 if failed else 0
     restartable = any(bool(result == r) for r in RESTART_STOPS)
     if restartable and len(walk.restarts) < MAX_RESTARTS and walk.done < ctx.max_points:
         lams = [ctx.lam(f_a)] + [p["lam"] for p in pts]
@@ -334,7 +341,14 @@ def ran_away(problem, y, limit) -> bool:
     """Whether the RMS alternating deflection of a mesh, from the scaled unknowns ``y``,
     exceeds ``limit`` ``(m,)`` (m): see :data:`RUNAWAY`."""
     X = np.asarray(y).reshape(problem.shape) * np.asarray(problem.x_scale)
-    deflection = X[1:] @ np.asarray(problem.system.W).T  # cos/sin amplitudes, (2K, m)
+    return exceeds(problem.system, X, limit)
+
+
+def exceeds(system, X, limit) -> bool:
+    """Whether the RMS alternating deflection of a mesh of the solution ``X`` ``(C, n)``
+    (coefficients, rad or m; periodic or on a torus: the rows are orthogonal) exceeds
+    ``limit`` ``(m,)`` (m)."""
+    deflection = np.asarray(X)[1:] @ np.asarray(system.W).T  # cos/sin amplitudes, (C-1, m)
     return bool(np.any(np.sqrt(0.5 * np.sum(deflection ** 2, axis=0)) > limit))
 
 
