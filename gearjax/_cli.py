@@ -403,7 +403,8 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--stage", help="reference stage id (default: first turning stage)")
     c.add_argument("--linear", action="store_true", help="no backlash")
     c.add_argument("--harmonics", type=int, metavar="K",
-                   help="solution harmonics (default: frequency-dependent)")
+                   help="solution harmonics (default: frequency-dependent; on a quasi-"
+                        "periodic gear, K on every torus angle)")
     c = command("optimize", _optimize_cmd,
                 "planet positions, sun-ring and stage phases that minimise the peak RMS "
                 "mesh force over a band")
@@ -419,7 +420,7 @@ def _parser() -> argparse.ArgumentParser:
                    "screened candidate (NetCDF)")
     c.add_argument("--harmonics", type=int, metavar="K",
                    help="harmonics of the linear screen and the sweeps (default: the highest "
-                        "excitation order)")
+                        "excitation order; on a quasi-periodic gear, K on every torus angle)")
     c.add_argument("--points", type=int, default=32, metavar="N",
                    help="frequencies per candidate of the linear screen (default 32)")
     c.add_argument("--final-points", type=int, default=96, metavar="N",
