@@ -220,10 +220,13 @@ class _Orbit(eqx.Module):
         if basis.G == 1 and self.turns == 1:
             p = _aft.synthesis(self.P, n)
             dp = self.w0 * _aft.synthesis(_aft.derivative(self.P), n)
-        else:
-            tau = jnp.asarray(2 * np.pi * self.turns * np.arange(n) / n)
-            p, dp = _line_series(self.P, basis, 1.0, tau[:, None])
-            dp = self.w0 * dp
+        else:  # the line's basis functions at the steps (no Omega in them), times P
+            tau = 2 * np.pi * self.turns * np.arange(n) / n
+            nu = jnp.asarray(_aft.frequency_numbers(basis)[1::2])
+            c, s_ = jnp.cos(tau[:, None] * nu), jnp.sin(tau[:, None] * nu)  # (n, P)
+            a, b = self.P[1::2], self.P[2::2]
+            p = self.P[0] + c @ a + s_ @ b
+            dp = self.w0 * ((c * nu) @ b - (s_ * nu) @ a)
         rates = jnp.asarray(s.mesh_rates(), dtype=float) * eta
         tau = jnp.asarray(2 * np.pi * self.turns * np.arange(n) / n)
         e, de = _mesh_series(s.te_cos, s.te_sin, rates, 1.0, tau[:, None])

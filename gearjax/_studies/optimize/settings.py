@@ -21,9 +21,11 @@ class OptimizeSettings:
     common grid the baseline, optimum and relaxation are compared on (plus the resonance
     frequencies and their proxy peaks);
     ``harmonics``: its K (``None``: the highest excitation order, so every stiffness
-    harmonic is resolved); ``nonlinear``: best linear candidates per stage swept with
+    harmonic is resolved; on a torus K on every angle, default each angle's highest
+    excitation order); ``nonlinear``: best linear candidates per stage swept with
     backlash (0: decide on the linear model); ``nonlinear_harmonics``: K of those sweeps
-    (``None``: ``harmonics``); ``max_step_hz``, ``max_points`` (continuation points per
+    (``None``: ``harmonics``, on a torus the largest of the screen's orders, on every
+    angle); ``max_step_hz``, ``max_points`` (continuation points per
     sweep), ``restarts``: of the sweeps (:func:`.nonlinear.nonlinear_band`);
     ``relax_iterations``: L-BFGS iterations of the continuous relaxation (0: skip it);
     ``temperature``: of its smooth peak (relative); ``passes``: rounds over the stages
