@@ -68,7 +68,8 @@ ARGUMENT_FLAGS = {
     "phase_grid": "--phase-grid", "screen": "--screen", "screen_points": "--points",
     "final_points": "--final-points", "nonlinear": "--nonlinear",
     "nonlinear_harmonics": "--harmonics", "relax_iterations": "--relax-iterations",
-    "passes": "--passes",
+    "passes": "--passes", "seeds": "--seeds", "recheck_band_hz": "--recheck-band",
+    "recheck_harmonics": "--recheck-harmonics",
     # plot
     "what": "--what", "out": "--out",
 }
@@ -435,11 +436,26 @@ def _parser() -> argparse.ArgumentParser:
                    help="candidates per stage solved by the linear harmonic balance (default 24)")
     c.add_argument("--nonlinear", type=int, default=2, metavar="N",
                    help="best candidates per stage swept with backlash (default 2; 0: decide "
-                        "on the linear model)")
+                        "on the linear model). Each sweep, the baseline's too, is complete: "
+                        "its peak is over every stable state the sweep and its completion "
+                        "find")
     c.add_argument("--max-step", type=float, metavar="HZ",
-                   help="largest frequency step of those sweeps")
-    c.add_argument("--max-points", type=int, default=400, metavar="N",
-                   help="continuation points per sweep before it restarts higher (default 400)")
+                   help="largest frequency step of those sweeps (default 1/100 of the band)")
+    c.add_argument("--max-points", type=int, default=3000, metavar="N",
+                   help="points of each of those sweeps, walk and completion together "
+                        "(default 3000; a sweep that spends them is flagged not complete)")
+    c.add_argument("--seeds", type=int, default=0, metavar="N",
+                   help="also seed those sweeps' completion from up and down integration "
+                        "sweeps over N even frequencies (default 0: none)")
+    c.add_argument("--no-recheck", dest="recheck", action="store_false",
+                   help="skip the re-check: by default, with --nonlinear > 0, baseline and "
+                        "optimum are swept afresh (complete sweeps at the sweep's own K) and "
+                        "integrated from their peak orbits, and the verdict is on those peaks")
+    c.add_argument("--recheck-band", type=float, nargs=2, metavar=("LO", "HI"),
+                   help="band of the re-check's sweeps (Hz; default --band)")
+    c.add_argument("--recheck-harmonics", type=int, metavar="K",
+                   help="fixed K of the re-check's sweeps (default: the sweep's own, "
+                        "frequency-dependent)")
     c.add_argument("--relax-iterations", type=int, default=10, metavar="N",
                    help="L-BFGS iterations of the continuous relaxation (0: skip)")
     c.add_argument("--passes", type=int, default=1, metavar="N",
@@ -1006,7 +1022,10 @@ def _sensitivity_cmd(args, train, notes) -> int:
 
 
 def _optimize_cmd(args, train, notes) -> int:
-    from ._studies.optimize import OptimizeSettings, optimize, optimize_dataset, optimize_json
+    from ._errors import bad_argument
+    from ._studies.optimize import (OptimizeSettings, optimize, optimize_dataset,
+                                    optimize_json, recheck, recheck_json)
+    from ._studies.optimize.settings import check_band
     from ._io.results import save_results
     from ._gear.toml_io import save_train
 
@@ -1014,19 +1033,42 @@ def _optimize_cmd(args, train, notes) -> int:
         proxy_points=args.proxy_points, phase_grid=args.phase_grid, screen=args.screen,
         screen_points=args.points, final_points=args.final_points, harmonics=args.harmonics,
         nonlinear=args.nonlinear,
-        max_step_hz=args.max_step, max_points=args.max_points,
+        max_step_hz=args.max_step, max_points=args.max_points, seeds=args.seeds,
         relax_iterations=args.relax_iterations,
         passes=args.passes)
+    rechecking = args.recheck and args.nonlinear > 0
+    recheck_band = tuple(args.recheck_band or args.band)
+    if rechecking:  # refused before the optimisation, in the re-check flags' words
+        try:
+            check_band(recheck_band)
+        except ArgumentError as e:
+            raise bad_argument("recheck_band_hz", e.value, e.rule) from None
+        if args.recheck_harmonics is not None and args.recheck_harmonics < 1:
+            raise bad_argument("recheck_harmonics", args.recheck_harmonics,
+                               "must be an integer >= 1")
     g = train.gear(args.gear)
     result = optimize(train, g.name, tuple(args.band), args.vary, stage=args.stage,
                       settings=settings, progress=_stderr)
+    check = None
+    if rechecking:
+        check = recheck(result, recheck_band, verify_hz=[],
+                        harmonics=args.recheck_harmonics, max_points=args.max_points,
+                        seeds=args.seeds, progress=_stderr)
+    outcome = check.verdict if check is not None else result.verdict
+    recommended = check.recommended_train if check is not None else result.recommended_train
     if args.out_train:
         with _atomic(args.out_train) as tmp:
-            save_train(result.train, tmp)
+            save_train(recommended, tmp)
+    attrs = {"command": args.command_line}
+    if check is not None:
+        attrs.update(recheck=recheck_json(check), recheck_verdict=check.verdict["text"],
+                     recommended=check.recommended)
     if args.out:
-        save_results(optimize_dataset(result, {"command": args.command_line}), args.out)
+        save_results(optimize_dataset(result, attrs), args.out)
     out = optimize_json(result)
-    out.update(out_train=args.out_train, out=args.out, warnings=notes)
+    out.update(recheck=None if check is None else recheck_json(check),
+               recommended=outcome["recommended"], conclusion=outcome["text"],
+               out_train=args.out_train, out=args.out, warnings=notes)
     code = EXIT_OK if result.converged else EXIT_NOT_CONVERGED
     if args.json:
         _emit(out)
@@ -1040,6 +1082,26 @@ def _optimize_cmd(args, train, notes) -> int:
     for name, d in (("baseline", b), ("optimum", o)):
         nl = "-" if d.nonlinear is None else f"{d.nonlinear_peak:.1f}"
         print(f"{name:>10} {d.linear_peak:>22.1f} {nl:>18}  " + _values_text(d.values))
+    models = result.models or {}
+    print(f"models: proxy {models['proxy']['frequencies']} frequencies x "
+          f"{models['proxy']['phase_grid']} phases; linear screen K = "
+          f"{models['linear']['harmonics']}, {models['linear']['frequencies_per_candidate']} "
+          "frequencies per candidate; with backlash: "
+          + ("none (--nonlinear 0)" if models.get("backlash") is None
+             else models["backlash"]["text"] + ", peak over every stable state")
+          + ("" if check is None else f"; re-check: {check.settings.text()}, "
+             f"{check.band_hz[0]:g}-{check.band_hz[1]:g} Hz"))
+    if check is not None:
+        print(f"{'re-check':>10} {'fresh peak (N)':>22} {'at (Hz)':>18}  integration from "
+              "that orbit")
+        for name, row in check.peaks.iterrows():
+            print(f"{name:>10} {row['sweep peak (N)']:>22.1f} {row['at (Hz)']:>18.1f}  "
+                  f"{row.get('integrated (N)', math.nan):.1f} N ({row['integration']}), "
+                  f"branch found by {row['branch found by'] or '-'}"
+                  + ("" if row["complete"] else ", sweep NOT complete"))
+    print(f"optimiser: {result.verdict['text']}")
+    if check is not None:
+        print(f"re-check: {check.verdict['text']}")
     r = result.relaxation
     if r is not None:
         print(f"{'relaxed':>10} {r.linear_peak:>22.1f} {'-':>18}  " + _values_text(r.values)
@@ -1051,7 +1113,8 @@ def _optimize_cmd(args, train, notes) -> int:
               + f", {s['linear_screened']} solved linear, {s['nonlinear_swept']} with "
               f"backlash: {s['chosen']}")
     if args.out_train:
-        print(f"optimised train written to {args.out_train}")
+        print(f"{'optimised' if outcome['recommended'] == 'optimum' else 'baseline'} train "
+              f"(the recommended design) written to {args.out_train}")
     if args.out:
         print(f"results written to {args.out}")
     return code

@@ -85,6 +85,7 @@ def test_torus_sweep_passes_both_folds(swept):
     assert np.all(stable[top + 2: low - 5] == 0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("which", ["upper", "lower"])
 def test_stable_torus_states_match_a_windowed_integration(swept, which):
     """At 0.75 rad/s, inside the band: the RMS alternating force and the separation share
@@ -110,3 +111,32 @@ def test_stable_torus_states_match_a_windowed_integration(swept, which):
     assert out.result == gj.RESULTS.quasi_periodic
     np.testing.assert_allclose(out.responses.rms_force[0], hb.rms_force[0], rtol=0.02)
     assert abs(float(out.responses.separation[0]) - float(hb.separation[0])) < 0.02
+
+
+@pytest.mark.slow
+def test_completion_finds_the_state_the_torus_walk_missed():
+    """The walk made to leave its branch right after the upper fold (``max_detour`` 5,
+    as where a gear's branch wanders) misses the impacting state of the hysteresis band;
+    the completion (the band's far end, the jumps: starts by time integration on the
+    torus) traces it: two stable states at 0.75 rad/s, as the full walk above has."""
+    system = oscillator()
+    F_static = static_mesh_forces(system)
+    runaway = _walk.RUNAWAY * (np.abs(np.asarray(F_static)) / np.asarray(system.kbar)
+                               + np.asarray(system.backlash))
+    ctx = Context(system=system, eta=1, smoothing=0.0, from_hz=hz(0.55), to_hz=hz(0.95),
+                  mu_ref=1.0, max_step_hz=hz(0.02), max_points=600, max_detour=5,
+                  runaway=runaway)
+    walk = _walk.Walk(segments=[(hz(0.55), hz(0.95), K)])
+    log, post = SweepLog([]), PostStream(F_static)
+    pieces, records = _api._run_walk(ctx, walk, log, post, linear=False, points=2,
+                                     progress=None, F_static=F_static, complete=True)
+    data = point_data(walk, log, post, ctx, F_static, linear=False, pieces=pieces)
+    assert walk.restarts and "restart" in [r["found"] for r in records]
+    w = 0.75
+    om, stable, branch = data["omega"], data["stable"] == 1, data["branch"]
+    rms = np.asarray(data["responses"].rms_force)[:, 0]
+    states = sorted(rms[i] for i in range(len(om) - 1)
+                    if branch[i] == branch[i + 1] and stable[i] and stable[i + 1]
+                    and (om[i] - w) * (om[i + 1] - w) <= 0)
+    assert len(states) == 2 and states[1] > 1.5 * states[0]
+    assert len(records) > 2  # walked, restarted, and at least one seeded branch

@@ -1,13 +1,17 @@
-"""The optimiser: stage by stage, proxy -> linear screen -> sweeps with backlash.
+"""The optimiser: stage by stage, proxy -> linear screen -> complete sweeps with backlash.
 
 Stages are optimised one at a time, in file order (``passes`` times). For each, every
 distinct planet set (:func:`gearjax._gear.planet_sets.phasing_classes`: one set per class
 the torsional model cannot tell apart, the best-balanced one) x a grid of sun-ring (and
 stage) phases is ranked by the first-order proxy (:mod:`.proxy`); the ``screen`` best
 are solved by the linear, time-varying harmonic balance (:mod:`.screen`), and the
-``nonlinear`` best of those that beat the incumbent by sweeps with backlash
-(:mod:`.nonlinear`). The incumbent (the current design) is always a candidate, so no step
-makes the objective worse on the model that decides it; ties go to the better-balanced
+``nonlinear`` best of those that beat the incumbent by complete sweeps with backlash
+(:mod:`.nonlinear`: the peak over every stable state the sweep and its completion find,
+the baseline's too, with the same settings). A candidate replaces the incumbent only
+where its peak with backlash is lower by more than :data:`NONLINEAR_RTOL` and its sweep
+is as trustworthy (:func:`trusted`); so no step makes the objective worse on the model
+that decides it, and where no candidate beats the baseline the optimum *is* the baseline
+(:func:`.result.verdict` says so). Ties of the linear screen go to the better-balanced
 planet set, then to the incumbent (:mod:`.ranking`).
 
 A gear whose mesh frequencies fall in ``G > 1`` incommensurate groups is optimised on its
@@ -38,17 +42,15 @@ from ..._gear.planet_sets import (
 from ..._gear.train import Train
 from .. import harmonics as _harmonics
 from ..design import orders_of, peak_of
-from .nonlinear import NonlinearBand, nonlinear_band
+from .nonlinear import NONLINEAR_RTOL, BandSettings, NonlinearBand, nonlinear_band
 from .proxy import proxy_screen
 from .ranking import RANK_RTOL, band_profile, leximax_order
 from .relaxation import relax
-from .result import Design, OptimizeResult
+from .result import Design, OptimizeResult, verdict
 from .screen import Screen, peak_indices, resonance_frequencies
 from .settings import OptimizeSettings, check_band, check_settings
 from .variables import StageVariables, phasing_variables, theta_of, with_stage
 
-NONLINEAR_RTOL = 1e-3
-"""Peaks of sweeps with backlash closer than this (relative) count as equal."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,10 +121,11 @@ def optimize(
                     settings.devices, settings.screen + 1, layout=case.layout)
     groups = np.asarray(nominal.mesh_group)
 
+    band_settings = BandSettings(harmonics=int(K_nl), max_step_hz=settings.max_step_hz,
+                                 max_points=settings.max_points, seeds=settings.seeds)
+
     def sweep_band(t):
-        return nonlinear_band(t, g.name, lo, hi, stage=ref, harmonics=K_nl,
-                              max_step_hz=settings.max_step_hz,
-                              max_points=settings.max_points, restarts=settings.restarts,
+        return nonlinear_band(t, g.name, lo, hi, stage=ref, settings=band_settings,
                               progress=say)
 
     study = StageStudy(gear=g.name, paths=paths, screen=screen, settings=settings,
@@ -133,11 +136,12 @@ def optimize(
         f"{', '.join(n for v in variables for n in v.names)}; linear screen K = "
         f"{_harmonics.orders_text(K)}, {settings.screen_points} frequencies per candidate"
         + torus)
+    models = _models(settings, K, band_settings if settings.nonlinear else None)
     base_nl = None
     if settings.nonlinear:
-        say("optimize: baseline, sweeps with backlash")
+        say(f"optimize: baseline, with backlash: {band_settings.text()}")
         base_nl = sweep_band(train)
-        say(f"optimize: baseline peak {base_nl.peak:.1f} N (backlash)")
+        say(f"optimize: baseline peak {base_nl.peak:.1f} N (backlash, every stable state)")
     current, cur_nl = train, base_nl
     rows: list[dict] = []
     stages_info = []
@@ -164,6 +168,7 @@ def optimize(
     peaks = np.concatenate([screen.f_proxy[peak_indices(row, n_peaks)] for row in per_f])
     f_final = np.unique(np.concatenate([np.geomspace(lo, hi, settings.final_points), peaks,
                                         f_res]))
+    models["final"]["frequencies"] = int(f_final.size)
     say(f"optimize: baseline and optimum{' and relaxation' if relaxation else ''} on a "
         f"common grid of {f_final.size} frequencies")
     final_rms = screen.rms(np.asarray(finals), np.broadcast_to(f_final, (len(finals),
@@ -180,6 +185,8 @@ def optimize(
     say(f"optimize: peak {baseline.linear_peak:.1f} -> {optimum.linear_peak:.1f} N (linear)"
         + (f", {baseline.nonlinear_peak:.1f} -> {optimum.nonlinear_peak:.1f} N (backlash)"
            if base_nl is not None else ""))
+    outcome = _verdict(settings, baseline, optimum, current is train, models)
+    say(f"optimize: {outcome['text']}")
     return OptimizeResult(
         gear=g.name, reference_stage=ref, band_hz=(lo, hi),
         vary=tuple(n for v in variables for n in v.names), paths=paths, baseline=baseline,
@@ -188,7 +195,46 @@ def optimize(
         frequencies_hz=f_final, meshes=tuple(nominal.mesh_labels),
         mesh_stage=tuple(nominal.mesh_group), mesh_side=tuple(nominal.mesh_side),
         mesh_planet=tuple(nominal.mesh_planet), settings=settings,
-        seconds=time.perf_counter() - t_start, harmonics=K, torus=torus_fields(case))
+        seconds=time.perf_counter() - t_start, harmonics=K, torus=torus_fields(case),
+        models=models, verdict=outcome)
+
+
+def _models(settings: OptimizeSettings, K, band: BandSettings | None) -> dict:
+    """Which model and settings each step of the optimisation used (JSON values):
+    ``proxy``, ``linear`` (the screen), ``backlash`` (the complete sweeps; ``None``
+    where ``nonlinear = 0``), ``final`` (the common grid) and ``relaxation``."""
+    K = list(K) if isinstance(K, tuple) else K
+    return {
+        "proxy": {"model": "first order in the stiffness variation (linear)",
+                  "frequencies": settings.proxy_points, "phase_grid": settings.phase_grid},
+        "linear": {"model": "linear time-varying harmonic balance (no backlash)",
+                   "harmonics": K, "frequencies_per_candidate": settings.screen_points,
+                   "candidates_per_stage": settings.screen},
+        "backlash": None if band is None else {
+            "model": "complete sweeps with backlash: the largest RMS mesh force over every "
+                     "stable state (stable == 1, result converged; runaway points left out)",
+            "candidates_per_stage": settings.nonlinear, "text": band.text(), **band.as_dict()},
+        "final": {"model": "linear time-varying harmonic balance (no backlash)",
+                  "harmonics": K, "geometric_frequencies": settings.final_points},
+        "relaxation": {"model": "linear time-varying harmonic balance, L-BFGS",
+                       "iterations": settings.relax_iterations},
+    }
+
+
+def _verdict(settings: OptimizeSettings, baseline: Design, optimum: Design, same: bool,
+             models: dict) -> dict:
+    """:func:`.result.verdict` of the optimum against the baseline on the model that
+    decided: the complete sweeps with backlash, or (``nonlinear = 0``) the linear one."""
+    if settings.nonlinear and baseline.nonlinear is not None:
+        b, o = baseline.nonlinear, optimum.nonlinear
+        return verdict(b.peak, o.peak, same=same, rtol=NONLINEAR_RTOL,
+                       model=f"complete-sweep peak with backlash "
+                             f"({models['backlash']['text']})",
+                       incomplete=[name for name, nl in (("baseline", b), ("optimum", o))
+                                   if not nl.complete])
+    return verdict(baseline.linear_peak, optimum.linear_peak, same=same, rtol=RANK_RTOL,
+                   model="linear peak (linear time-varying model, no backlash: nonlinear = "
+                         "0; a design that must hold with backlash needs the sweeps)")
 
 
 def _design(study: StageStudy, variables, t: Train, rms, nl) -> Design:
@@ -309,27 +355,22 @@ def _optimise_stage(study: StageStudy, current: Train, v: StageVariables,
     pick = 0
     swept = 0
     if settings.nonlinear and cur_nl is not None and better:
-        rows[row_of[0]].update(nonlinear_stage_peak=cur_nl.stage_peaks.get(sid, math.nan),
-                               nonlinear_peak=cur_nl.peak, nonlinear_coverage=cur_nl.coverage)
+        rows[row_of[0]].update(_nonlinear_fields(cur_nl, sid))
         results = {0: cur_nl}
         for i in better[:settings.nonlinear]:
             t = cands[i - 1]
             say(f"optimize: stage {sid}: candidate {_show_set(t.stage(sid).planet_angles_deg)}"
-                f", sun-ring {float(t.stage(sid).sun_ring_phase_deg):.1f} deg, sweeps with "
-                "backlash")
+                f", sun-ring {float(t.stage(sid).sun_ring_phase_deg):.1f} deg, complete sweep "
+                "with backlash")
             nl = study.sweep_band(t)
             swept += 1
             results[i] = nl
-            rows[row_of[i]].update(nonlinear_stage_peak=nl.stage_peaks.get(sid, math.nan),
-                                   nonlinear_peak=nl.peak, nonlinear_coverage=nl.coverage)
+            rows[row_of[i]].update(_nonlinear_fields(nl, sid))
             say(f"optimize: stage {sid}: peak {nl.peak:.1f} N with backlash (incumbent "
-                f"{cur_nl.peak:.1f} N), band coverage {nl.coverage:.3f}")
+                f"{cur_nl.peak:.1f} N), band coverage {nl.coverage:.3f}"
+                + ("" if nl.complete else ", sweep not complete"))
         rank_of = {int(i): k for k, i in enumerate(ranking)}
-        fair = [i for i, nl in results.items()
-                if np.isfinite(nl.peak) and nl.coverage >= min(0.95, cur_nl.coverage)]
-        scale = max(results[i].peak for i in fair)
-        pick = min(fair, key=lambda i: (round(results[i].peak / (NONLINEAR_RTOL * scale)),
-                                        rank_of[i]))
+        pick = pick_nonlinear(results, rank_of)
         new_nl = results[pick]
     else:
         pick = int(ranking[0]) if np.isfinite(lin_all[ranking[0]]) else 0
@@ -353,13 +394,49 @@ def _optimise_stage(study: StageStudy, current: Train, v: StageVariables,
     return (*new, info)
 
 
+def trusted(nl: NonlinearBand, incumbent: NonlinearBand) -> bool:
+    """Whether the complete sweep ``nl`` of a candidate may replace the ``incumbent``'s:
+    a finite peak, as much of the band traced (coverage at least the incumbent's, or
+    0.95), and complete wherever the incumbent's is (a sweep stopped by its budget may
+    miss the stable state that would set its peak)."""
+    return (bool(np.isfinite(nl.peak)) and nl.coverage >= min(0.95, incumbent.coverage)
+            and (nl.complete or not incumbent.complete))
+
+
+def pick_nonlinear(results: dict, rank_of: dict) -> int:
+    """The key of ``results`` (``{0: incumbent band, i: candidate band}``,
+    :class:`NonlinearBand`) that the stage keeps: among the :func:`trusted` candidates
+    whose peak is below the incumbent's by more than :data:`NONLINEAR_RTOL` (any trusted
+    one where the incumbent has no finite peak), the lowest peak, those within
+    :data:`NONLINEAR_RTOL` of it ranked by the linear screen (``rank_of``); ``0`` (the
+    incumbent) where none is."""
+    cur = results[0]
+    bar = cur.peak * (1 - NONLINEAR_RTOL) if np.isfinite(cur.peak) else math.inf
+    beating = [i for i, nl in results.items()
+               if i != 0 and trusted(nl, cur) and nl.peak < bar]
+    if not beating:
+        return 0
+    low = min(results[i].peak for i in beating)
+    near = [i for i in beating if results[i].peak <= low * (1 + NONLINEAR_RTOL)]
+    return min(near, key=lambda i: rank_of[i])
+
+
+def _nonlinear_fields(nl: NonlinearBand, sid: str) -> dict:
+    """A candidate row's fields from its complete sweep with backlash ``nl``."""
+    return {"nonlinear_stage_peak": nl.stage_peaks.get(sid, math.nan),
+            "nonlinear_peak": nl.peak, "nonlinear_walk_peak": nl.walk_peak,
+            "nonlinear_peak_hz": nl.peak_hz, "nonlinear_coverage": nl.coverage,
+            "nonlinear_complete": float(nl.complete)}
+
+
 def _row(stage, angles, gamma, phase, proxy, lin_stage, lin_all, incumbent=False) -> dict:
     return {"stage": stage, "planet_angles_deg": np.asarray(angles, float),
             "sun_ring_phase_deg": float(gamma), "stage_phase_deg": float(phase),
             "proxy_peak": float(proxy), "linear_stage_peak": float(lin_stage),
             "linear_peak": float(lin_all), "nonlinear_stage_peak": math.nan,
-            "nonlinear_peak": math.nan, "nonlinear_coverage": math.nan,
-            "incumbent": incumbent, "selected": False}
+            "nonlinear_peak": math.nan, "nonlinear_walk_peak": math.nan,
+            "nonlinear_peak_hz": math.nan, "nonlinear_coverage": math.nan,
+            "nonlinear_complete": math.nan, "incumbent": incumbent, "selected": False}
 
 
 def _columns(rows, n_max) -> dict:

@@ -26,20 +26,33 @@ def _design_json(d: Design) -> dict:
         "admissible": d.admissible,
         "linear_peak": d.linear_peak,
         "linear_stage_peaks": d.linear_stage_peaks,
+        "nonlinear": None if nl is None else band_json(nl),
         "nonlinear_peak": None if nl is None else nl.peak,
-        "nonlinear_stage_peaks": None if nl is None else nl.stage_peaks,
-        "nonlinear_coverage": None if nl is None else nl.coverage,
-        "nonlinear_unstable_points": None if nl is None else nl.unstable,
-        "nonlinear_implausible_points": None if nl is None else nl.implausible,
-        "nonlinear_sweeps": None if nl is None else [
-            {"from_hz": a, "stop": b} for a, b in zip(nl.starts_hz, nl.stops)],
     }
 
 
+def band_json(nl) -> dict:
+    """A complete sweep with backlash (:class:`.nonlinear.NonlinearBand`) as JSON: its
+    peak over stable states, where, on which mesh and how that branch was found, the
+    walk's peak, per-stage peaks, the point counts, branches, coverage, whether it is
+    complete, and its settings."""
+    return {"peak": nl.peak, "peak_hz": nl.peak_hz, "peak_mesh": nl.peak_mesh,
+            "peak_found": nl.peak_found, "walk_peak": nl.walk_peak,
+            "stage_peaks": nl.stage_peaks, "points": nl.points,
+            "stable_points": int(nl.frequencies_hz.size), "unstable_points": nl.unstable,
+            "runaway_points": nl.runaway, "not_converged_points": nl.not_converged,
+            "branches": list(nl.branches), "stop": nl.stop, "coverage": nl.coverage,
+            "complete": nl.complete, "settings": nl.settings.as_dict(),
+            "seconds": nl.seconds}
+
+
 def optimize_json(result: OptimizeResult) -> dict:
-    """The ``optimize`` JSON: ``baseline``, ``optimum`` (values, peaks), ``improvement``
-    (optimum / baseline peak, linear and with backlash), ``relaxation``, ``stages``,
-    ``candidates`` (those solved by the linear harmonic balance), settings;
+    """The ``optimize`` JSON: ``verdict`` (:func:`.result.verdict`: whether the optimum
+    beats the baseline on the model that decided, by how much, the recommended design),
+    ``models`` (which model and settings each step used), ``baseline``, ``optimum``
+    (values, peaks; ``nonlinear``: the complete sweep with backlash, :func:`band_json`),
+    ``improvement`` (optimum / baseline peak, linear and with backlash), ``relaxation``,
+    ``stages``, ``candidates`` (those solved by the linear harmonic balance), settings;
     ``harmonics``: K of the linear screen (on a torus the list of orders per angle) and
     ``torus``: what a torus study solved (null for a periodic gear)."""
     b, o = result.baseline, result.optimum
@@ -57,7 +70,9 @@ def optimize_json(result: OptimizeResult) -> dict:
         "reference_stage": result.reference_stage,
         "band_hz": list(result.band_hz),
         "vary": list(result.vary),
-        "objective": "largest RMS alternating mesh force over the band and every mesh (N)",
+        "objective": OBJECTIVE,
+        "verdict": result.verdict,
+        "models": result.models,
         "baseline": _design_json(b),
         "optimum": _design_json(o),
         "improvement": {"linear": ratio(o.linear_peak, b.linear_peak),
@@ -76,6 +91,10 @@ def optimize_json(result: OptimizeResult) -> dict:
     }
 
 
+OBJECTIVE = ("largest RMS alternating mesh force over the band and every mesh (N); with "
+             "backlash over every stable state of a complete sweep")
+
+
 def _orders_json(K):
     """K as JSON: an int, or on a torus the list of orders per angle."""
     return list(K) if isinstance(K, tuple) else K
@@ -84,18 +103,24 @@ def _orders_json(K):
 def optimize_frame(result: OptimizeResult):
     """Baseline, optimum and relaxation side by side: a ``pandas.DataFrame`` with one row
     per design and the columns ``linear peak (N)`` (common grid), ``backlash peak (N)``
-    (stable points of the sweeps; NaN where not swept), the linear peak of each stage's
+    (every stable state of the complete sweep; NaN where not swept), where it is
+    (``backlash peak at (Hz)``), how its branch was found (``branch found by``), whether
+    the sweep is complete (``sweep complete``), the linear peak of each stage's
     meshes, each varied stage's planet angles (deg), planet imbalance
     (:func:`gearjax._gear.planet_sets.planet_imbalance`), sun-ring and stage phases (deg), and ``assemblable``."""
     b, o, r = result.baseline, result.optimum, result.relaxation
     stages = list(dict.fromkeys(result.mesh_stage))
     rows = {}
-    designs = [("baseline", b.values, b.linear_rms, b.nonlinear_peak, b.admissible),
-               ("optimum", o.values, o.linear_rms, o.nonlinear_peak, o.admissible)]
+    designs = [("baseline", b.values, b.linear_rms, b.nonlinear, b.admissible),
+               ("optimum", o.values, o.linear_rms, o.nonlinear, o.admissible)]
     if r is not None:
-        designs.append(("relaxed", r.values, r.linear_rms, math.nan, False))
+        designs.append(("relaxed", r.values, r.linear_rms, None, False))
     for name, values, rms, nl, ok in designs:
-        row = {"linear peak (N)": float(np.nanmax(rms)), "backlash peak (N)": nl}
+        row = {"linear peak (N)": float(np.nanmax(rms)),
+               "backlash peak (N)": math.nan if nl is None else nl.peak,
+               "backlash peak at (Hz)": math.nan if nl is None else nl.peak_hz,
+               "branch found by": "" if nl is None else nl.peak_found,
+               "sweep complete": None if nl is None else nl.complete}
         for sid in stages:
             cols = np.asarray(result.mesh_stage) == sid
             row[f"stage {sid} linear peak (N)"] = float(np.nanmax(rms[:, cols]))
@@ -123,8 +148,12 @@ def optimize_dataset(result: OptimizeResult, attrs: dict | None = None):
     ``optimum_point`` (the converged points of their sweeps). Variables: the candidate
     columns of :class:`OptimizeResult` (``proxy_peak`` etc., N), ``linear_rms``
     (``design, frequency, mesh``, N), ``baseline_nonlinear_rms`` /
-    ``optimum_nonlinear_rms`` with their ``..._frequency_hz``. Attributes: ``kind``,
-    ``gear``, ``reference_stage``, ``band_hz``, ``vary``, the peaks
+    ``optimum_nonlinear_rms`` (the stable points of their complete sweeps) with their
+    ``..._frequency_hz`` and ``..._branch_found``. Attributes: ``kind``,
+    ``gear``, ``reference_stage``, ``band_hz``, ``vary``, ``verdict`` (its ``text``)
+    and ``recommended`` (``optimum`` or ``baseline``, :func:`.result.verdict`),
+    ``verdict_json``, ``models`` (JSON: the model and settings of each step),
+    ``baseline_nonlinear`` / ``optimum_nonlinear`` (JSON, :func:`band_json`), the peaks
     (``baseline_peak_linear``, ``optimum_peak_linear``, ``baseline_peak_nonlinear``,
     ``optimum_peak_nonlinear``, ``relaxed_peak_linear``; NaN where not computed), the
     values (JSON), ``stages``, ``settings``, ``harmonics`` (the linear screen's K; JSON
@@ -136,15 +165,20 @@ def optimize_dataset(result: OptimizeResult, attrs: dict | None = None):
     r = result.relaxation
     n_max = c["planet_angles_deg"].shape[1]
     units = {"proxy_peak": "N", "linear_stage_peak": "N", "linear_peak": "N",
-             "nonlinear_stage_peak": "N", "nonlinear_peak": "N", "nonlinear_coverage": "1",
+             "nonlinear_stage_peak": "N", "nonlinear_peak": "N", "nonlinear_walk_peak": "N",
+             "nonlinear_peak_hz": "Hz", "nonlinear_coverage": "1", "nonlinear_complete": "1",
              "sun_ring_phase_deg": "deg", "stage_phase_deg": "deg", "incumbent": "1",
              "selected": "1"}
     names = {"proxy_peak": "largest RMS mesh force, first-order proxy",
              "linear_stage_peak": "largest RMS force of the stage's meshes, linear HB",
              "linear_peak": "largest RMS mesh force, linear time-varying HB",
              "nonlinear_stage_peak": "largest RMS force of the stage's meshes, with backlash",
-             "nonlinear_peak": "largest RMS mesh force, sweeps with backlash",
-             "nonlinear_coverage": "share of the band (log frequency) the sweeps traced",
+             "nonlinear_peak": "largest RMS mesh force over every stable state of a "
+                               "complete sweep with backlash",
+             "nonlinear_walk_peak": "the same over the branches of the sweep's walk alone",
+             "nonlinear_peak_hz": "where the peak with backlash is",
+             "nonlinear_coverage": "share of the band (log frequency) the sweep traced",
+             "nonlinear_complete": "1: the sweep's completion ran to its end",
              "sun_ring_phase_deg": "sun-ring phase", "stage_phase_deg": "stage phase",
              "incumbent": "the design before this stage's step",
              "selected": "chosen at this stage's step"}
@@ -161,7 +195,10 @@ def optimize_dataset(result: OptimizeResult, attrs: dict | None = None):
                           {"units": "N", "long_name": "RMS alternating mesh force, linear "
                            "time-varying harmonic balance"})
     for which, d in (("baseline", result.baseline), ("optimum", result.optimum)):
-        if d.nonlinear is not None:
+        if d.nonlinear is not None and d.nonlinear.frequencies_hz.size:
+            data[f"{which}_nonlinear_branch_found"] = (
+                f"{which}_point", d.nonlinear.found.astype(str),
+                {"units": "1", "long_name": "how the point's branch was found"})
             data[f"{which}_nonlinear_frequency_hz"] = (
                 f"{which}_point", d.nonlinear.frequencies_hz,
                 {"units": "Hz", "long_name": "reference-stage mesh frequency"})
@@ -185,7 +222,15 @@ def optimize_dataset(result: OptimizeResult, attrs: dict | None = None):
         "reference_stage": result.reference_stage,
         "band_hz": list(result.band_hz),
         "vary": list(result.vary),
-        "objective": "largest RMS alternating mesh force over the band and every mesh (N)",
+        "objective": OBJECTIVE,
+        "verdict": (result.verdict or {}).get("text", ""),
+        "recommended": (result.verdict or {}).get("recommended", ""),
+        "verdict_json": result.verdict or {},
+        "models": result.models or {},
+        "baseline_nonlinear": {} if result.baseline.nonlinear is None else band_json(
+            result.baseline.nonlinear),
+        "optimum_nonlinear": {} if result.optimum.nonlinear is None else band_json(
+            result.optimum.nonlinear),
         "baseline_peak_linear": result.baseline.linear_peak,
         "optimum_peak_linear": result.optimum.linear_peak,
         "baseline_peak_nonlinear": result.baseline.nonlinear_peak,

@@ -1,6 +1,9 @@
-"""An independent re-check of a phasing optimisation: fresh sweeps with backlash (the
-sweep's own harmonics), time integration from their peak orbits and
-:func:`gearjax.verify_gear` at the peak frequencies, for the baseline and the optimum."""
+"""An independent re-check of a phasing optimisation: fresh complete sweeps with backlash
+(the sweep's own harmonics: every stable state the sweep and its completion find), time
+integration from their peak orbits and :func:`gearjax.verify_gear` at the peak
+frequencies, for the baseline and the optimum, and the verdict: whether the optimum's
+fresh peak is below the baseline's, or that no admissible phasing the optimiser tried
+beats the baseline (then the recommended design is the baseline)."""
 
 from __future__ import annotations
 
@@ -15,13 +18,14 @@ import numpy as np
 import pandas as pd
 
 from ..._engine.time_domain import hb_initial_state
-from ..._gear.toml_io import loads_train
+from ..._gear.toml_io import dumps_train, loads_train
 from ..._io.results import displacement_coefficients
 from ..simulate import simulate_gear
 from ..sweep import sweep
 from ..verify import verify_gear
-from .nonlinear import MAX_DLF
-from .result import OptimizeResult
+from .nonlinear import NONLINEAR_RTOL, BandSettings, band_of
+from .nonlinear import band_peak as band_peak
+from .result import OptimizeResult, verdict
 from .settings import check_band
 
 
@@ -30,15 +34,21 @@ class Recheck:
     """An independent re-check of a phasing optimisation (:func:`recheck`).
 
     **Fields:** ``band_hz``: the band swept; ``sweeps``: ``{"baseline", "optimum"}`` ->
-    :class:`~gearjax.SweepResult`, fresh sweeps with backlash (the sweep's own
-    frequency-dependent harmonics, no point budget of the optimiser); ``orbits``: the same
+    :class:`~gearjax.SweepResult`, fresh complete sweeps with backlash (``settings``, a
+    :class:`.nonlinear.BandSettings`: by default the sweep's own frequency-dependent
+    harmonics); ``bands``: the same keys -> :class:`.nonlinear.NonlinearBand` (the peak
+    over every stable state); ``verdict``: :func:`.result.verdict` of the fresh peaks
+    (plus, in its text, an integration that does not confirm a peak); ``trains``: the
+    same keys -> the designs' trains; ``orbits``: the same
     keys -> results Dataset of the time integration started from the sweep's peak orbit
     (one point); ``verify``: the same keys -> :class:`~gearjax.VerifyResult` at
     ``verify_hz`` (harmonic balance solved afresh at each point, then integrated);
     ``peaks``: ``pandas.DataFrame``, one row per design: the optimiser's peaks (linear,
     with backlash), the fresh sweep's peak over its stable points (N), where and on which
-    mesh, the integration's RMS of that mesh from that orbit and their difference, the
-    sweep's points, unstable points, restarts and stop; ``points``: ``pandas.DataFrame``,
+    mesh, how the peak's branch was found, the peak of the sweep's walk alone, the
+    integration's RMS of that mesh from that orbit and their difference, the sweep's
+    points, unstable points, branches, restarts, stop and whether it is complete;
+    ``points``: ``pandas.DataFrame``,
     one row per design and ``verify_hz`` frequency: the largest RMS mesh force by
     harmonic balance and by integration (N), the largest stage-relative difference, the
     integration result, whether every mesh is within the tolerance; ``seconds``.
@@ -52,21 +62,26 @@ class Recheck:
     peaks: object
     points: object
     seconds: float
+    settings: BandSettings = BandSettings()
+    bands: dict = dataclasses.field(default_factory=dict)
+    verdict: dict = dataclasses.field(default_factory=dict)
+    trains: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def recommended(self) -> str:
+        """``"optimum"`` where its fresh peak beats the baseline's, else ``"baseline"``."""
+        return self.verdict.get("recommended", "baseline")
+
+    @property
+    def recommended_train(self):
+        """The train of the :attr:`recommended` design."""
+        return self.trains[self.recommended]
 
 
-def band_peak(ds, max_dlf: float = MAX_DLF) -> tuple[float, float, str, int]:
-    """``(peak RMS (N), reference-stage Hz, mesh, point index)`` of a sweep Dataset over
-    its converged, stable points whose load factors are at most ``max_dlf`` (as
-    :class:`NonlinearBand`); ``(nan, nan, "", -1)`` when there is none."""
-    ok = np.asarray(ds["converged"].values, bool) & (np.asarray(ds["stable"].values) == 1)
-    dlf = np.asarray(ds["dlf"].values, float)
-    ok &= np.nanmax(np.where(np.isfinite(dlf), dlf, 0.0), axis=1) <= max_dlf
-    rms = np.where(ok[:, None], np.asarray(ds["rms_force"].values, float), -np.inf)
-    if not np.any(np.isfinite(rms)):
-        return math.nan, math.nan, "", -1
-    i, j = np.unravel_index(int(np.argmax(rms)), rms.shape)
-    return (float(rms[i, j]), float(ds["mesh_frequency_hz"].values[i]),
-            str(ds["mesh"].values[j]), int(i))
+INTEGRATION_RTOL = 0.02
+"""An integration from a peak orbit confirms it where it converges and its RMS of the
+peak mesh is within this (relative) of the sweep's (the tolerance with backlash of
+:func:`gearjax.verify_gear`)."""
 
 
 def point_state(ds, i: int):
@@ -130,6 +145,7 @@ def recheck(
     harmonics: int | None = None,
     max_step_hz: float | None = None,
     max_points: int = 3000,
+    seeds: int = 0,
     progress: Callable[[str], None] | None = None,
 ) -> Recheck:
     """Re-check the baseline and the optimum of ``result`` independently of the optimiser.
@@ -137,19 +153,25 @@ def recheck(
     ``result``: an :class:`OptimizeResult`, or the Dataset of a saved one
     (:func:`optimize_dataset`, ``gearjax optimize --out``; ``gj.load_results``).
 
-    For each design: (1) a fresh sweep with backlash over ``band_hz`` (default the
-    optimisation's band; a part of it around the peaks is cheaper) by
-    :func:`gearjax.sweep` with its own frequency-dependent harmonics (``harmonics``: a
-    fixed K instead), ``max_step_hz`` and ``max_points``; its peak over stable points
-    (:func:`band_peak`); (2) time integration (diffrax) started from the sweep's peak
+    For each design: (1) a fresh complete sweep with backlash over ``band_hz`` (default
+    the optimisation's band; a part of it around the peaks is cheaper) by
+    :func:`gearjax.sweep` (``complete=True``) with its own frequency-dependent harmonics
+    (``harmonics``: a fixed K instead), ``max_step_hz``, ``max_points`` and ``seeds``;
+    its peak over every stable state (:func:`.nonlinear.band_peak`: ``stable == 1``,
+    result ``converged``, runaway points left out); (2) time integration (diffrax)
+    started from the sweep's peak
     orbit: a stable orbit is what the integration settles on, with the same RMS; (3)
     :func:`gearjax.verify_gear` at ``verify_hz`` (default: the fresh peak frequencies of
     both designs), the harmonic balance solved afresh there and integrated. On a torus
     (``G > 1`` incommensurate groups) the sweeps are torus continuations and both
     integrations are windowed ones (:func:`gearjax.simulate_gear`,
-    :func:`gearjax.verify_gear`).
+    :func:`gearjax.verify_gear`). Then the verdict (:func:`.result.verdict` on the fresh
+    peaks, :data:`.nonlinear.NONLINEAR_RTOL`): the optimum's fresh peak is below the
+    baseline's by so much, or no admissible phasing the optimiser tried beats the
+    baseline and the recommended design is the baseline.
 
-    **Returns:** :class:`Recheck` (tables ``peaks`` and ``points``). **Raises:**
+    **Returns:** :class:`Recheck` (tables ``peaks`` and ``points``, ``verdict``).
+    **Raises:**
     ``ArgumentError`` naming ``band_hz`` for a bad band; ``ValueError`` for a
     ``result`` of another kind; ``TrainError`` as :func:`gearjax.sweep`.
     """
@@ -157,21 +179,26 @@ def recheck(
     say = progress or (lambda message: None)
     gear, ref, band, designs = recheck_designs(result)
     lo, hi = check_band(band if band_hz is None else band_hz)
-    sweeps, orbits, peak_rows, peak_at = {}, {}, [], {}
+    settings = BandSettings(harmonics=harmonics, max_step_hz=max_step_hz,
+                            max_points=max_points, seeds=seeds)
+    sweeps, bands, orbits, peak_rows, peak_at = {}, {}, {}, [], {}
     for name, (train, linear_peak, nonlinear_peak) in designs.items():
-        say(f"recheck: {name}, sweep with backlash {lo:g}-{hi:g} Hz")
-        sw = sweep(train, gear, lo, hi, stage=ref,
-                   harmonics=harmonics, max_step_hz=max_step_hz, max_points=max_points)
+        say(f"recheck: {name}, {settings.text()} with backlash {lo:g}-{hi:g} Hz")
+        sw = sweep(train, gear, lo, hi, stage=ref, harmonics=harmonics,
+                   max_step_hz=max_step_hz, max_points=max_points, complete=True, seeds=seeds)
         sweeps[name] = sw
         ds = sw.dataset
+        band = bands[name] = band_of(sw, lo, hi, settings)
         peak, f_peak, mesh, i = band_peak(ds)
         row = {"design": name, "optimiser linear peak (N)": linear_peak,
                "optimiser backlash peak (N)": nonlinear_peak,
-               "sweep peak (N)": peak, "at (Hz)": f_peak, "mesh": mesh}
+               "sweep peak (N)": peak, "at (Hz)": f_peak, "mesh": mesh,
+               "branch found by": band.peak_found, "walk peak (N)": band.walk_peak}
         if i >= 0:
             peak_at[name] = f_peak
-            say(f"recheck: {name}, {ds.sizes['point']} points in {sw.seconds:.0f} s, peak "
-                f"{peak:.1f} N at {f_peak:.1f} Hz ({mesh}); integrating from that orbit")
+            say(f"recheck: {name}, {ds.sizes['point']} points on {len(band.branches)} "
+                f"branches in {sw.seconds:.0f} s, peak {peak:.1f} N at {f_peak:.1f} Hz "
+                f"({mesh}, branch found by {band.peak_found}); integrating from that orbit")
             x0, v0 = point_state(ds, i)
             ni = simulate_gear(train, gear, [f_peak], stage=ref, x0=x0, v0=v0)
             orbits[name] = ni
@@ -182,11 +209,13 @@ def recheck(
         else:
             row.update({"integrated (N)": math.nan, "rel diff": math.nan,
                         "integration": "no stable point"})
-        stable = np.asarray(ds["stable"].values)
-        row.update({"points": int(ds.sizes["point"]), "unstable": int(np.sum(stable == 0)),
-                    "restarts": len(sw.restarts), "stop": sw.stop,
+        row.update({"points": band.points, "unstable": band.unstable,
+                    "runaway": band.runaway, "branches": len(band.branches),
+                    "restarts": len(sw.restarts), "stop": sw.stop, "complete": band.complete,
                     "sweep seconds": sw.seconds})
         peak_rows.append(row)
+    outcome = _fresh_verdict(designs, bands, peak_rows, settings)
+    say(f"recheck: {outcome['text']}")
     if verify_hz is None:
         verify_hz = sorted({round(f, 3) for f in peak_at.values()})
     verify_hz = tuple(float(f) for f in verify_hz)
@@ -211,4 +240,37 @@ def recheck(
                     "all meshes ok": bool(np.all(v.ok[k]))})
     return Recheck(band_hz=(lo, hi), verify_hz=verify_hz, sweeps=sweeps, orbits=orbits,
                    verify=checks, peaks=pd.DataFrame(peak_rows).set_index("design"),
-                   points=pd.DataFrame(point_rows), seconds=time.perf_counter() - t0)
+                   points=pd.DataFrame(point_rows), seconds=time.perf_counter() - t0,
+                   settings=settings, bands=bands, verdict=outcome,
+                   trains={name: d[0] for name, d in designs.items()})
+
+
+def _fresh_verdict(designs: dict, bands: dict, rows: list, settings: BandSettings) -> dict:
+    """:func:`.result.verdict` of the fresh complete-sweep peaks, with a note where an
+    integration from a peak orbit does not confirm it (:data:`INTEGRATION_RTOL`)."""
+    same = dumps_train(designs["baseline"][0]) == dumps_train(designs["optimum"][0])
+    out = verdict(bands["baseline"].peak, bands["optimum"].peak, same=same,
+                  rtol=NONLINEAR_RTOL,
+                  model=f"fresh complete-sweep peak with backlash ({settings.text()})",
+                  incomplete=[n for n in ("baseline", "optimum") if not bands[n].complete])
+    unconfirmed = [f"{r['design']} ({r['integration']}, rel diff {r['rel diff']:.2g})"
+                   for r in rows if not (r["integration"] == "converged"
+                                         and r["rel diff"] <= INTEGRATION_RTOL)]
+    out["integration_confirms"] = not unconfirmed
+    if unconfirmed:
+        out["text"] += ("; time integration from the peak orbit does not confirm the peak "
+                        f"of the {', '.join(unconfirmed)}")
+    return out
+
+
+def recheck_json(check: Recheck) -> dict:
+    """A :class:`Recheck` as JSON: ``band_hz``, ``settings`` (the fresh sweeps'),
+    ``verdict``, ``recommended``, ``peaks`` (one record per design), ``points`` (the
+    verification points), ``verify_hz``, ``seconds``."""
+    def records(frame):
+        return json.loads(frame.reset_index().to_json(orient="records")) if len(frame) else []
+
+    return {"band_hz": list(check.band_hz), "settings": check.settings.as_dict(),
+            "verdict": check.verdict, "recommended": check.recommended,
+            "peaks": records(check.peaks), "points": records(check.points),
+            "verify_hz": list(check.verify_hz), "seconds": check.seconds}

@@ -19,7 +19,8 @@ class Design:
 
     **Fields:** ``values``: path -> value of every varied path (deg); ``planet_sets``:
     stage -> angles (deg); ``linear_peak``, ``linear_stage_peaks`` (N) and
-    ``linear_rms`` ``(F, m)`` (N) on the result's common grid; ``nonlinear`` (:class:`NonlinearBand` or ``None``);
+    ``linear_rms`` ``(F, m)`` (N) on the result's common grid; ``nonlinear``
+    (:class:`NonlinearBand`: its complete sweep with backlash, or ``None``);
     ``admissible``: every planet set assemblable and clear.
     """
 
@@ -33,6 +34,8 @@ class Design:
 
     @property
     def nonlinear_peak(self) -> float:
+        """The largest RMS mesh force over every stable state of the complete sweep with
+        backlash (N; NaN where not swept)."""
         return self.nonlinear.peak if self.nonlinear is not None else math.nan
 
 
@@ -54,7 +57,10 @@ class OptimizeResult:
     ``settings``; ``seconds``; ``converged``: the optimum has converged points;
     ``harmonics``: K of the linear screen (an ``int``, or on a torus the orders per
     angle, a tuple); ``torus``: what a torus study solves
-    (:func:`~gearjax._gear.case.torus_fields`; ``None`` for a periodic gear).
+    (:func:`~gearjax._gear.case.torus_fields`; ``None`` for a periodic gear);
+    ``models``: which model and settings each step used (``proxy``, ``linear``,
+    ``backlash``, ``final``, ``relaxation``; JSON values); ``verdict``: the optimum
+    against the baseline on the model that decided (:func:`verdict`).
     """
 
     gear: str
@@ -78,6 +84,14 @@ class OptimizeResult:
     seconds: float
     harmonics: int | tuple[int, ...] | None = None
     torus: dict | None = None
+    models: dict | None = None
+    verdict: dict | None = None
+
+    @property
+    def recommended_train(self) -> Train:
+        """The optimum where it beats the baseline (``verdict``), else the baseline."""
+        beats = (self.verdict or {}).get("recommended") == "optimum"
+        return self.train if beats else self.baseline_train
 
     @property
     def converged(self) -> bool:
@@ -85,3 +99,48 @@ class OptimizeResult:
         if self.optimum.nonlinear is not None:
             ok = ok and self.optimum.nonlinear.frequencies_hz.size > 0
         return ok
+
+
+NO_BETTER = "no admissible phasing it tried beats the baseline"
+"""The words of a :func:`verdict` where the optimum does not beat the baseline."""
+
+
+def verdict(baseline_peak: float, optimum_peak: float, *, same: bool, rtol: float, model: str,
+            incomplete: list | tuple = ()) -> dict:
+    """The optimum against the baseline, in plain words.
+
+    ``baseline_peak``, ``optimum_peak``: their peaks (N) on ``model`` (what the peaks are,
+    named in the text); ``same``: the optimum is the baseline design; ``rtol``: the
+    optimum beats the baseline only where its peak is lower by more than this
+    (relative); ``incomplete``: names of the designs whose sweep is not complete (said
+    in the text: a stable state may be missing).
+
+    **Returns:** ``{"beats_baseline", "recommended" ("optimum" or "baseline"),
+    "baseline_peak", "optimum_peak", "reduction" (N, baseline - optimum; NaN where a peak
+    is), "reduction_relative", "model", "text"}``; the text says either that the
+    optimum's peak is below the baseline's and by how much, or :data:`NO_BETTER` and that
+    the recommended design is the baseline.
+    """
+    b, o = float(baseline_peak), float(optimum_peak)
+    comparable = math.isfinite(b) and math.isfinite(o)
+    beats = bool(not same and comparable and o < b * (1 - rtol))
+    drop = b - o if comparable else math.nan
+    if beats:
+        text = (f"the optimum's {model} is {o:.1f} N, below the baseline's {b:.1f} N by "
+                f"{drop:.1f} N ({100 * drop / b:.1f}%)")
+    else:
+        if same and math.isfinite(b):
+            why = f"the baseline's {model} is {b:.1f} N; every step kept the incumbent"
+        elif comparable:
+            why = f"the optimum's {model} is {o:.1f} N against the baseline's {b:.1f} N"
+        else:
+            why = (f"no {model} to compare: baseline {b:.1f} N, optimum {o:.1f} N (NaN: no "
+                   "stable state counted)")
+        text = f"{NO_BETTER} ({why}): the recommended design is the baseline"
+    if incomplete:
+        text += (f"; the sweep of the {' and the '.join(incomplete)} is not complete (point "
+                 "budget or branch cap spent): a stable state may be missing")
+    return {"beats_baseline": beats, "recommended": "optimum" if beats else "baseline",
+            "baseline_peak": b, "optimum_peak": o, "reduction": drop,
+            "reduction_relative": drop / b if comparable and b else math.nan,
+            "model": model, "text": text}

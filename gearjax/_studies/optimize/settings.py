@@ -23,10 +23,13 @@ class OptimizeSettings:
     ``harmonics``: its K (``None``: the highest excitation order, so every stiffness
     harmonic is resolved; on a torus K on every angle, default each angle's highest
     excitation order); ``nonlinear``: best linear candidates per stage swept with
-    backlash (0: decide on the linear model); ``nonlinear_harmonics``: K of those sweeps
-    (``None``: ``harmonics``, on a torus the largest of the screen's orders, on every
-    angle); ``max_step_hz``, ``max_points`` (continuation points per
-    sweep), ``restarts``: of the sweeps (:func:`.nonlinear.nonlinear_band`);
+    backlash (0: decide on the linear model); the sweeps with backlash (the baseline's,
+    each incumbent's and each candidate's) are complete sweeps
+    (:func:`.nonlinear.nonlinear_band`: every stable state counts) with
+    ``nonlinear_harmonics``: their fixed K (``None``: ``harmonics``, on a torus the
+    largest of the screen's orders, on every angle), ``max_step_hz`` (``None``: 1/100 of
+    the band), ``max_points`` (points of one sweep, walk and completion together) and
+    ``seeds`` (integration seeds of the completion, 0: none);
     ``relax_iterations``: L-BFGS iterations of the continuous relaxation (0: skip it);
     ``temperature``: of its smooth peak (relative); ``passes``: rounds over the stages
     (a later stage's choice can unpin an earlier one's peak);
@@ -43,8 +46,8 @@ class OptimizeSettings:
     nonlinear: int = 2
     nonlinear_harmonics: int | None = None
     max_step_hz: float | None = None
-    max_points: int = 400
-    restarts: int = 8
+    max_points: int = 3000
+    seeds: int = 0
     relax_iterations: int = 10
     temperature: float = 0.01
     passes: int = 1
@@ -54,7 +57,7 @@ class OptimizeSettings:
 
 INTEGER_BOUNDS = (("proxy_points", 2), ("phase_grid", 1), ("screen", 1),
                      ("screen_points", 2), ("nonlinear", 0), ("final_points", 2),
-                     ("restarts", 0), ("max_points", 2), ("relax_iterations", 0),
+                     ("seeds", 0), ("max_points", 2), ("relax_iterations", 0),
                      ("passes", 1), ("chunk", 1))
 """Integer fields of :class:`OptimizeSettings` and their lower bounds, in checking order."""
 

@@ -291,7 +291,10 @@ class Periods:
 
     def plan(self, plan, eta: int) -> list:
         """The band's segments ``(f_a, f_b, K)`` of ``ctx`` with the harmonics of period
-        ``eta``: ``K eta / ctx.eta`` (the same harmonics of the base frequency)."""
+        ``eta``: ``K eta / ctx.eta`` (the same harmonics of the base frequency); the plan
+        itself for ``eta = ctx.eta`` (a torus plan, orders per angle, has no other)."""
+        if eta == self.ctx.eta:
+            return list(plan)
         return [(a, b, K * eta // self.ctx.eta) for a, b, K in plan]
 
 
