@@ -14,9 +14,22 @@ matrix (the paper case at K = 64), for which the issue's 30 s target assumes 60-
 and the time after compile in units of it.
 
     python benchmarks/paper_sweep.py [--from 2000 --to 15000] [--linear-only]
-        [--max-points 3000] [--out-dir DIR]
+        [--max-points 3000] [--out-dir DIR] [--no-complete]
+    python benchmarks/paper_sweep.py --compare-completion [--rounds 2] [--seeds 0]
 
 Writes ``paper_linear.nc``/``.png`` and ``paper_backlash.nc``/``.png`` to ``--out-dir``.
+``--no-complete``: the backlash sweep without the completion (``complete=False``: the
+walk alone, the sweep before issue 29).
+
+``--compare-completion`` (issue 29, item 5): the backlash sweep with the completion (the
+default; ``--seeds``: its integration seeds) against the walk alone, each run once to
+compile and then ``--rounds`` times interleaved (walk, completed, walk, completed, ...)
+in this process; prints the times after compilation with their ratio, the points and
+branches, and where the completed sweep's time goes, from the times of its progress
+calls: the walk, the branches the completion traced (their continuation, with the
+points each adds), the time between them (the walked branches' rows, the far-end start,
+the jump seeds' time integrations, period-doubling switches, known-orbit checks, each
+traced branch's responses and stability) and after the last point (the dataset).
 """
 
 from __future__ import annotations
@@ -164,6 +177,102 @@ def table(ds) -> None:
                   f"{np.nanmax(ds['back_contact'].values[keep][:, cols]):>9.3f} {err:>14.2e}")
 
 
+class Clock:
+    """A sweep's ``progress`` callback that keeps, per point found, the time, the points
+    done and the branch (the third argument: branches begun so far; a traced branch
+    reports its own number plus one)."""
+
+    def __init__(self):
+        self.calls: list[tuple[float, int, int]] = []
+
+    def __call__(self, points, frequency_hz, branches):
+        self.calls.append((time.perf_counter(), points, branches))
+
+
+def phases(clock: Clock, t0: float, t1: float, walk_branches: int) -> dict:
+    """The time (s) of a completed sweep's parts from its progress calls, ``t0`` and
+    ``t1`` the call's start and end: ``walk`` (to the walk's last point), ``branches``
+    (per branch the completion traced: ``(seconds, points)`` from its first point to its
+    last), ``between`` (the rest until the last point: the walked branches' rows, the
+    far-end start, jump seeds, period-doubling switches, the known-orbit checks, the
+    traced branches' rows) and ``tail`` (after the last point: the rows of the last
+    branch, the seeds found from it, and the dataset)."""
+    calls = clock.calls
+    walk = [c for c in calls if c[2] <= walk_branches]
+    k = next((i for i, c in enumerate(calls) if c[2] > walk_branches), len(calls))
+    t_walk = calls[k - 1][0] if k else t0
+    spans: dict[int, list] = {}
+    for t, _, b in calls[k:]:
+        spans.setdefault(b, []).append(t)
+    branches = {b - 1: (ts[-1] - ts[0], len(ts)) for b, ts in spans.items()}
+    t_last = calls[-1][0] if calls else t0
+    traced = sum(s for s, _ in branches.values())
+    return {"walk": t_walk - t0, "walk_points": len(walk), "branches": branches,
+            "between": t_last - t_walk - traced, "tail": t1 - t_last}
+
+
+def compare_completion(train, args) -> None:
+    """The backlash sweep with and without the completion, interleaved (module
+    docstring)."""
+    def run(complete):
+        clock = Clock()
+        t0 = time.perf_counter()
+        r = gj.sweep(train, "first", args.f_from, args.f_to, max_points=args.max_points,
+                     complete=complete, seeds=args.seeds if complete else 0, progress=clock)
+        return r, clock, t0, time.perf_counter()
+
+    lu_s = machine_reference()
+    compiled = _compile_seconds[0]
+    first = {c: run(c)[0] for c in (False, True)}
+    print(f"first runs (compiling, {_compile_seconds[0] - compiled:.1f} s of compile events): "
+          f"walk {first[False].seconds:.1f} s, completed {first[True].seconds:.1f} s; "
+          f"reference LU of 1806 unknowns {1e3 * lu_s:.1f} ms", flush=True)
+    walks, completes = [], []
+    for k in range(args.rounds):
+        for complete, out in ((False, walks), (True, completes)):
+            out.append(run(complete))
+            print(f"round {k + 1}: {'completed' if complete else 'walk'} "
+                  f"{out[-1][0].seconds:.1f} s", flush=True)
+    tw = np.array([r.seconds for r, *_ in walks])
+    tc = np.array([r.seconds for r, *_ in completes])
+    walk_ds, done = walks[-1][0].dataset, completes[-1][0]
+    pw, pc = walk_ds.sizes["point"], done.dataset.sizes["point"]
+    nw = len(set(walk_ds["branch"].values.tolist()))
+    print(f"\n== completion cost, {args.f_from:.0f}-{args.f_to:.0f} Hz, 0.05 mm backlash, "
+          f"seeds={args.seeds}, after compilation, {gj.threads()} threads")
+    print(f"{'':>10} {'walk alone':>11} {'completed':>10} {'ratio':>6}")
+    for k in range(args.rounds):
+        print(f"{'round ' + str(k + 1):>10} {tw[k]:>10.1f}s {tc[k]:>9.1f}s "
+              f"{tc[k] / tw[k]:>6.2f}")
+    print(f"{'mean':>10} {tw.mean():>10.1f}s {tc.mean():>9.1f}s {tc.mean() / tw.mean():>6.2f}")
+    print(f"{'points':>10} {pw:>11} {pc:>10} {pc / pw:>6.2f}")
+    print(f"{'branches':>10} {nw:>11} {len(done.branches):>10}")
+    parts = [phases(c, t0, t1, nw) for _, c, t0, t1 in completes]
+    alone = [phases(c, t0, t1, nw) for _, c, t0, t1 in walks]
+    mean = lambda key, ps: float(np.mean([p[key] for p in ps]))  # noqa: E731
+    traced = np.mean([sum(s for s, _ in p["branches"].values()) for p in parts])
+    added = sum(n for _, n in parts[-1]["branches"].values())
+    print(f"\n{'part (mean s)':>44} {'walk alone':>11} {'completed':>10}")
+    print(f"{'walk: continuation to its last point':>44} {mean('walk', alone):>10.1f}s "
+          f"{mean('walk', parts):>9.1f}s")
+    print(f"{'completion: traced branches (continuation)':>44} {'':>11} {traced:>9.1f}s "
+          f"({added} points, {len(parts[-1]['branches'])} branches)")
+    print(f"{'completion: seeds, checks, rows between':>44} {'':>11} "
+          f"{mean('between', parts):>9.1f}s")
+    print(f"{'after the last point: rows, seeds, dataset':>44} {mean('tail', alone):>10.1f}s "
+          f"{mean('tail', parts):>9.1f}s")
+    extra = tc.mean() - tw.mean()
+    print(f"completed - walk: {extra:.1f} s for {pc - pw} points more "
+          f"({1e3 * extra / max(pc - pw, 1):.0f} ms per added point; the walk alone "
+          f"{1e3 * tw.mean() / pw:.0f} ms per point)")
+    spans = parts[-1]["branches"]
+    for b in done.branches:
+        n = int(np.sum(done.dataset["branch"].values == b["branch"]))
+        sec = spans.get(b["branch"], (0.0, 0))[0]
+        print(f"  branch {b['branch']:>2} {b['found']:<18} at {b['seed_hz']:>8.1f} Hz "
+              f"eta {b.get('eta', 1)}: {n:>4} points, {sec:>5.1f} s, stops {b['stops']}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--from", dest="f_from", type=float, default=2000.0)
@@ -172,18 +281,29 @@ def main() -> None:
     ap.add_argument("--max-points", type=int, default=3000, help="continuation cap")
     ap.add_argument("--linear-only", action="store_true")
     ap.add_argument("--out-dir", default=".")
+    ap.add_argument("--no-complete", action="store_true",
+                    help="backlash sweep without the completion (the walk alone)")
+    ap.add_argument("--compare-completion", action="store_true",
+                    help="backlash sweep with and without the completion, interleaved")
+    ap.add_argument("--rounds", type=int, default=2, help="--compare-completion rounds")
+    ap.add_argument("--seeds", type=int, default=0,
+                    help="integration seeds of the completed sweep (--compare-completion)")
     args = ap.parse_args()
-    out = pathlib.Path(args.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", gj.GeometryWarning)
         train = gj.load_train()
+    if args.compare_completion:
+        compare_completion(train, args)
+        return
+    out = pathlib.Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
     runs = [("linear", True)] + ([] if args.linear_only else [("backlash", False)])
     lu_s = machine_reference()
     for name, linear in runs:
         compiled = _compile_seconds[0]
         first, result = (gj.sweep(train, "first", args.f_from, args.f_to, linear=linear,
                                   points=args.points, max_points=args.max_points,
+                                  complete=not args.no_complete,
                                   progress=gj.progress_printer(sys.stderr)) for _ in range(2))
         report(name, first, _compile_seconds[0] - compiled, result, lu_s)
         breakdown(train, result)

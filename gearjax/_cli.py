@@ -1039,10 +1039,11 @@ def _optimize_cmd(args, train, notes) -> int:
     rechecking = args.recheck and args.nonlinear > 0
     recheck_band = tuple(args.recheck_band or args.band)
     if rechecking:  # refused before the optimisation, in the re-check flags' words
-        try:
-            check_band(recheck_band)
-        except ArgumentError as e:
-            raise bad_argument("recheck_band_hz", e.value, e.rule) from None
+        if args.recheck_band is not None:  # (the default, --band, the optimiser checks)
+            try:
+                check_band(recheck_band)
+            except ArgumentError as e:
+                raise bad_argument("recheck_band_hz", e.value, e.rule) from None
         if args.recheck_harmonics is not None and args.recheck_harmonics < 1:
             raise bad_argument("recheck_harmonics", args.recheck_harmonics,
                                "must be an integer >= 1")

@@ -90,3 +90,28 @@ def paper_train_h1():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", gj.GeometryWarning)
         return dataclasses.replace(gj.load_train(), stiffness_harmonics=1)
+
+
+@pytest.fixture(scope="module")
+def torus_h1_file(tmp_path_factory):
+    """tests/data/two_stage_14_17.toml (mesh frequencies 14 : 17, two frequency groups)
+    with one stiffness harmonic per mesh, written to a temporary file: its path."""
+    import pathlib
+
+    data = pathlib.Path(__file__).parent / "data" / "two_stage_14_17.toml"
+    path = tmp_path_factory.mktemp("torus") / "two_stage_h1.toml"
+    path.write_text(data.read_text().replace("stiffness_harmonics = 4",
+                                             "stiffness_harmonics = 1", 1))
+    return path
+
+
+@pytest.fixture(scope="module")
+def torus_h1_train(torus_h1_file):
+    """The train of :func:`torus_h1_file` (its geometry warning silenced)."""
+    import warnings
+
+    import gearjax as gj
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gj.GeometryWarning)
+        return gj.load_train(torus_h1_file)

@@ -10,6 +10,7 @@ import itertools
 import json
 import math
 import os
+import pathlib
 import subprocess
 import sys
 import textwrap
@@ -30,30 +31,7 @@ THETAS = np.array([[90.0, 0.0, 0.0], [86.4, 30.0, 45.0], [93.6, 60.0, 90.0],
                    [82.8, 10.0, 0.0], [97.2, 200.0, 300.0]])
 FREQS = (2500.0, 6000.0, 11000.0)
 
-SMALL = """
-name = "three planets"
-stiffness_harmonics = 2
-
-[[stages]]
-id = "a"
-teeth = { sun = 20, planet = 10, ring = 40 }
-module_mm = 2.0
-pressure_angle_deg = 20.0
-planet_angles_deg = [0, 90, 180]      # admissible (60 slots of 6 deg) but unbalanced
-sun_ring_phase_deg = 90.0
-contact_ratio = { sun = 1.9, ring = 1.92 }
-mesh_stiffness = { sun = 3e8, ring = 4e8 }
-mesh_damping_ratio = 0.05
-half_backlash = { sun = 5e-5, ring = 5e-5 }
-inertia = { sun = 2e-4, ring = 5e-3, carrier = 1e-3, planet = 5e-5 }
-planet_mass = 0.2
-
-[gears.low]
-input = "a.sun"
-output = "a.carrier"
-brakes = ["a.ring"]
-input_torque = 100.0
-"""
+SMALL = (pathlib.Path(__file__).parent.parent / "data" / "three_planets.toml").read_text()
 TINY = ["--band", "2000", "9000", "--harmonics", "4", "--points", "6", "--final-points", "8",
         "--proxy-points", "32", "--phase-grid", "4", "--screen", "3", "--nonlinear", "0",
         "--relax-iterations", "2"]
@@ -303,8 +281,8 @@ def test_optimiser_improves_and_returns_an_admissible_design(small):
 def test_nonlinear_tier_never_makes_the_peak_with_backlash_worse(small):
     train = gj.load_train(small)
     settings = O.OptimizeSettings(proxy_points=32, phase_grid=4, screen=2, screen_points=6,
-                                  final_points=6, harmonics=4, nonlinear=1, max_points=40,
-                                  restarts=1, relax_iterations=0)
+                                  final_points=6, harmonics=4, nonlinear=1,
+                                  relax_iterations=0)
     result = O.optimize(train, "low", (3000.0, 4000.0), settings=settings)
     b, o = result.baseline.nonlinear, result.optimum.nonlinear
     assert b is not None and o is not None and b.frequencies_hz.size and o.frequencies_hz.size

@@ -14,8 +14,6 @@ At 8500 Hz the stage-2 meshes are past a resonance: with backlash a mesh separat
 from __future__ import annotations
 
 import json
-import pathlib
-import warnings
 
 import jax.numpy as jnp
 import numpy as np
@@ -33,25 +31,14 @@ from gearjax._studies import harmonics as _harmonics
 from gearjax._studies import optimize as O
 from gearjax._studies.optimize.screen import resonance_frequencies
 
-DATA = pathlib.Path(__file__).parent.parent / "data"
 AT = 8500.0  # Hz, stage 1 (the reference stage): stage-2 meshes separate with backlash
 MESH = "2.rp4"  # the largest RMS there
 PATHS = ("2.mesh_stiffness.ring", "2.inertia.planet", "2.planet_angles_deg.3")
 
 
 @pytest.fixture(scope="module")
-def h1_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("torus_studies") / "two_stage_h1.toml"
-    path.write_text((DATA / "two_stage_14_17.toml").read_text().replace(
-        "stiffness_harmonics = 4", "stiffness_harmonics = 1", 1))
-    return path
-
-
-@pytest.fixture(scope="module")
-def train(h1_file):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train(h1_file)
+def train(torus_h1_train):
+    return torus_h1_train
 
 
 def torus_problem(train, linear: bool):
@@ -78,7 +65,7 @@ def resolved(train, linear: bool, f_hz: float, X0=None):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("linear", [True, False], ids=["linear", "backlash"])
-def test_torus_sensitivity_matches_finite_differences(train, h1_file, linear, capsys):
+def test_torus_sensitivity_matches_finite_differences(train, torus_h1_file, linear, capsys):
     """The implicit derivative of mesh 2.rp4's RMS force on the torus against central
     differences of independently re-solved points.
 
@@ -95,7 +82,7 @@ def test_torus_sensitivity_matches_finite_differences(train, h1_file, linear, ca
     basis's bookkeeping wrong) cannot meet.
     """
     if linear:  # the command line, JSON included, for one of the two
-        rc = main(["sensitivity", str(h1_file), "--at", str(AT), "--harmonics", "2",
+        rc = main(["sensitivity", str(torus_h1_file), "--at", str(AT), "--harmonics", "2",
                    "--mesh", MESH, "--vary", *PATHS, "--linear", "--json"])
         assert rc == 0
         out = json.loads(capsys.readouterr().out)
@@ -189,13 +176,13 @@ def test_torus_proxy_equals_the_periodic_proxy(train):
     np.testing.assert_allclose(phased[0, 0, 0], phased[0, 0, 1], rtol=1e-12)
 
 
-def test_torus_stage_phase_origins(train, h1_file, capsys):
+def test_torus_stage_phase_origins(train, torus_h1_file, capsys):
     """Each frequency group's first stage phase is its angle's origin: left out of the
     default variables and refused, with the reason, from the command line."""
     assert O.default_vary(train, "first") == [
         "1.planet_angles_deg", "1.sun_ring_phase_deg", "2.planet_angles_deg",
         "2.sun_ring_phase_deg"]
-    rc = main(["optimize", str(h1_file), "--band", "3000", "3300",
+    rc = main(["optimize", str(torus_h1_file), "--band", "3000", "3300",
                "--vary", "2.stage_phase_deg", "--json"])
     err = capsys.readouterr().err
     assert rc == 2 and "Traceback" not in err
@@ -203,13 +190,13 @@ def test_torus_stage_phase_origins(train, h1_file, capsys):
 
 
 @pytest.mark.slow
-def test_torus_optimize_from_the_command_line(train, h1_file, tmp_path, capsys):
+def test_torus_optimize_from_the_command_line(train, torus_h1_file, tmp_path, capsys):
     """``gearjax optimize --json`` on the torus train with a tiny budget: a valid result
     that names the torus and its orders, an optimum no worse than the baseline on the
     linear model, and linear forces on the common grid that an independent re-solve of
     the optimum train reproduces."""
     saved = tmp_path / "optimize.nc"
-    rc = main(["optimize", str(h1_file), "--band", "3000", "3300",
+    rc = main(["optimize", str(torus_h1_file), "--band", "3000", "3300",
                "--vary", "1.sun_ring_phase_deg", "2.sun_ring_phase_deg", "--harmonics", "2",
                "--points", "4", "--final-points", "3", "--proxy-points", "8",
                "--phase-grid", "2", "--screen", "1", "--nonlinear", "0",

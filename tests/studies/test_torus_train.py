@@ -11,7 +11,6 @@ One stiffness harmonic and orders (2, 2) keep the problems small (13 coefficient
 from __future__ import annotations
 
 import json
-import pathlib
 import warnings
 
 import numpy as np
@@ -22,23 +21,12 @@ import gearjax as gj
 from gearjax._cli import main
 from gearjax._studies import sweep as _sweep
 
-DATA = pathlib.Path(__file__).parent.parent / "data"
 BAND = dict(from_hz=3000.0, to_hz=3060.0, harmonics=2, max_step_hz=10.0)
 
 
 @pytest.fixture(scope="module")
-def h1_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("torus") / "two_stage_h1.toml"
-    path.write_text((DATA / "two_stage_14_17.toml").read_text().replace(
-        "stiffness_harmonics = 4", "stiffness_harmonics = 1", 1))
-    return path
-
-
-@pytest.fixture(scope="module")
-def train(h1_file):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", gj.GeometryWarning)
-        return gj.load_train(h1_file)
+def train(torus_h1_train):
+    return torus_h1_train
 
 
 @pytest.fixture(scope="module")
@@ -98,8 +86,8 @@ def test_a_resumed_torus_sweep_equals_the_uninterrupted_one(train, full, tmp_pat
     assert path.read_bytes() == data
 
 
-def test_cli_sweep_json_of_a_two_group_train(h1_file, capsys):
-    code = main(["sweep", str(h1_file), "--from", "3000", "--to", "3020", "--harmonics", "2",
+def test_cli_sweep_json_of_a_two_group_train(torus_h1_file, capsys):
+    code = main(["sweep", str(torus_h1_file), "--from", "3000", "--to", "3020", "--harmonics", "2",
                  "--max-step", "10", "--json"])
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and out["solver"]["torus"]["G"] == 2

@@ -52,7 +52,6 @@ from .settings import OptimizeSettings, check_band, check_settings
 from .variables import StageVariables, phasing_variables, theta_of, with_stage
 
 
-
 @dataclasses.dataclass(frozen=True)
 class StageStudy:
     """What every stage step of one optimisation shares.
@@ -228,13 +227,13 @@ def _verdict(settings: OptimizeSettings, baseline: Design, optimum: Design, same
     if settings.nonlinear and baseline.nonlinear is not None:
         b, o = baseline.nonlinear, optimum.nonlinear
         return verdict(b.peak, o.peak, same=same, rtol=NONLINEAR_RTOL,
-                       model=f"complete-sweep peak with backlash "
-                             f"({models['backlash']['text']})",
+                       model="complete-sweep peak with backlash",
+                       settings=models["backlash"]["text"],
                        incomplete=[name for name, nl in (("baseline", b), ("optimum", o))
                                    if not nl.complete])
     return verdict(baseline.linear_peak, optimum.linear_peak, same=same, rtol=RANK_RTOL,
-                   model="linear peak (linear time-varying model, no backlash: nonlinear = "
-                         "0; a design that must hold with backlash needs the sweeps)")
+                   model="linear peak", settings="linear time-varying model, no backlash "
+                   "(nonlinear = 0): a design that must hold with backlash needs the sweeps")
 
 
 def _design(study: StageStudy, variables, t: Train, rms, nl) -> Design:

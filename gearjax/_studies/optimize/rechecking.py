@@ -181,8 +181,18 @@ def recheck(
     lo, hi = check_band(band if band_hz is None else band_hz)
     settings = BandSettings(harmonics=harmonics, max_step_hz=max_step_hz,
                             max_points=max_points, seeds=seeds)
+    same = dumps_train(designs["baseline"][0]) == dumps_train(designs["optimum"][0])
     sweeps, bands, orbits, peak_rows, peak_at = {}, {}, {}, [], {}
     for name, (train, linear_peak, nonlinear_peak) in designs.items():
+        if name == "optimum" and same:  # the optimiser kept the baseline: one design
+            say("recheck: the optimum is the baseline design: its re-check is the baseline's")
+            sweeps[name], bands[name] = sweeps["baseline"], bands["baseline"]
+            if "baseline" in orbits:
+                orbits[name] = orbits["baseline"]
+            peak_rows.append({**peak_rows[0], "design": name,
+                              "optimiser linear peak (N)": linear_peak,
+                              "optimiser backlash peak (N)": nonlinear_peak})
+            continue
         say(f"recheck: {name}, {settings.text()} with backlash {lo:g}-{hi:g} Hz")
         sw = sweep(train, gear, lo, hi, stage=ref, harmonics=harmonics,
                    max_step_hz=max_step_hz, max_points=max_points, complete=True, seeds=seeds)
@@ -214,7 +224,7 @@ def recheck(
                     "restarts": len(sw.restarts), "stop": sw.stop, "complete": band.complete,
                     "sweep seconds": sw.seconds})
         peak_rows.append(row)
-    outcome = _fresh_verdict(designs, bands, peak_rows, settings)
+    outcome = _fresh_verdict(same, bands, peak_rows, settings)
     say(f"recheck: {outcome['text']}")
     if verify_hz is None:
         verify_hz = sorted({round(f, 3) for f in peak_at.values()})
@@ -222,6 +232,10 @@ def recheck(
     checks, point_rows = {}, []
     if verify_hz:
         for name, (train, *_) in designs.items():
+            if name == "optimum" and same:
+                checks[name] = checks["baseline"]
+                point_rows += [{**r, "design": name} for r in point_rows]
+                continue
             say(f"recheck: {name}, harmonic balance and time integration at "
                 f"{', '.join(f'{f:g}' for f in verify_hz)} Hz")
             v = verify_gear(train, gear, list(verify_hz), stage=ref, harmonics=harmonics)
@@ -245,21 +259,20 @@ def recheck(
                    trains={name: d[0] for name, d in designs.items()})
 
 
-def _fresh_verdict(designs: dict, bands: dict, rows: list, settings: BandSettings) -> dict:
-    """:func:`.result.verdict` of the fresh complete-sweep peaks, with a note where an
-    integration from a peak orbit does not confirm it (:data:`INTEGRATION_RTOL`)."""
-    same = dumps_train(designs["baseline"][0]) == dumps_train(designs["optimum"][0])
-    out = verdict(bands["baseline"].peak, bands["optimum"].peak, same=same,
-                  rtol=NONLINEAR_RTOL,
-                  model=f"fresh complete-sweep peak with backlash ({settings.text()})",
-                  incomplete=[n for n in ("baseline", "optimum") if not bands[n].complete])
+def _fresh_verdict(same: bool, bands: dict, rows: list, settings: BandSettings) -> dict:
+    """:func:`.result.verdict` of the fresh complete-sweep peaks (``same``: the optimum is
+    the baseline design), with a note where an integration from a peak orbit does not
+    confirm it (:data:`INTEGRATION_RTOL`)."""
     unconfirmed = [f"{r['design']} ({r['integration']}, rel diff {r['rel diff']:.2g})"
                    for r in rows if not (r["integration"] == "converged"
                                          and r["rel diff"] <= INTEGRATION_RTOL)]
+    out = verdict(bands["baseline"].peak, bands["optimum"].peak, same=same,
+                  rtol=NONLINEAR_RTOL, model="fresh complete-sweep peak with backlash",
+                  settings=f"re-check: {settings.text()}",
+                  incomplete=[n for n in ("baseline", "optimum") if not bands[n].complete],
+                  notes=["time integration from the peak orbit does not confirm the peak "
+                         f"of the {', '.join(unconfirmed)}"] if unconfirmed else [])
     out["integration_confirms"] = not unconfirmed
-    if unconfirmed:
-        out["text"] += ("; time integration from the peak orbit does not confirm the peak "
-                        f"of the {', '.join(unconfirmed)}")
     return out
 
 

@@ -106,20 +106,22 @@ NO_BETTER = "no admissible phasing it tried beats the baseline"
 
 
 def verdict(baseline_peak: float, optimum_peak: float, *, same: bool, rtol: float, model: str,
-            incomplete: list | tuple = ()) -> dict:
+            settings: str = "", incomplete: list | tuple = (), notes: list | tuple = ()
+            ) -> dict:
     """The optimum against the baseline, in plain words.
 
     ``baseline_peak``, ``optimum_peak``: their peaks (N) on ``model`` (what the peaks are,
-    named in the text); ``same``: the optimum is the baseline design; ``rtol``: the
-    optimum beats the baseline only where its peak is lower by more than this
+    e.g. ``complete-sweep peak with backlash``; ``settings``: how they were computed, said
+    after the text in brackets); ``same``: the optimum is the baseline design; ``rtol``:
+    the optimum beats the baseline only where its peak is lower by more than this
     (relative); ``incomplete``: names of the designs whose sweep is not complete (said
-    in the text: a stable state may be missing).
+    in the text: a stable state may be missing); ``notes``: more clauses for the text.
 
     **Returns:** ``{"beats_baseline", "recommended" ("optimum" or "baseline"),
     "baseline_peak", "optimum_peak", "reduction" (N, baseline - optimum; NaN where a peak
-    is), "reduction_relative", "model", "text"}``; the text says either that the
-    optimum's peak is below the baseline's and by how much, or :data:`NO_BETTER` and that
-    the recommended design is the baseline.
+    is), "reduction_relative", "model", "settings", "text"}``; the text says either that
+    the optimum's peak is below the baseline's and by how much, or :data:`NO_BETTER` and
+    that the recommended design is the baseline.
     """
     b, o = float(baseline_peak), float(optimum_peak)
     comparable = math.isfinite(b) and math.isfinite(o)
@@ -130,17 +132,21 @@ def verdict(baseline_peak: float, optimum_peak: float, *, same: bool, rtol: floa
                 f"{drop:.1f} N ({100 * drop / b:.1f}%)")
     else:
         if same and math.isfinite(b):
-            why = f"the baseline's {model} is {b:.1f} N; every step kept the incumbent"
+            why = f"every step kept the incumbent, the baseline's {model} is {b:.1f} N"
         elif comparable:
             why = f"the optimum's {model} is {o:.1f} N against the baseline's {b:.1f} N"
         else:
-            why = (f"no {model} to compare: baseline {b:.1f} N, optimum {o:.1f} N (NaN: no "
+            why = (f"no {model} to compare, baseline {b:.1f} N, optimum {o:.1f} N (NaN: no "
                    "stable state counted)")
-        text = f"{NO_BETTER} ({why}): the recommended design is the baseline"
+        text = f"{NO_BETTER}: {why}; the recommended design is the baseline"
     if incomplete:
         text += (f"; the sweep of the {' and the '.join(incomplete)} is not complete (point "
                  "budget or branch cap spent): a stable state may be missing")
+    for note in notes:
+        text += f"; {note}"
+    if settings:
+        text += f" [{settings}]"
     return {"beats_baseline": beats, "recommended": "optimum" if beats else "baseline",
             "baseline_peak": b, "optimum_peak": o, "reduction": drop,
             "reduction_relative": drop / b if comparable and b else math.nan,
-            "model": model, "text": text}
+            "model": model, "settings": settings, "text": text}

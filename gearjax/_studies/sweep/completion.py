@@ -31,8 +31,10 @@ A new seed is continued both ways, up to the band's ends (across the segments of
 band, each with its K), until it reaches one, closes on itself (an isola, one way
 only), meets a branch traced before (a point within 0.6 of the local chord of one of
 its points: the orbit is already traced), detours, runs away or cannot go on
-(:mod:`~gearjax._studies.sweep.walk`). The new branch's stable stretches are seeds in
-turn, until no seed is new or :data:`MAX_BRANCHES` are traced.
+(:mod:`~gearjax._studies.sweep.walk`); an isola whose way up detours before it comes
+round (longer than ``max_detour`` points) closes where its way down meets its way up.
+The new branch's stable stretches are seeds in turn, until no seed is new or
+:data:`MAX_BRANCHES` are traced.
 
 Orbits of another period are another problem: the known orbits and the meeting check
 are per K and ``eta`` (:class:`Atlas`), so a doubled branch is never taken for the
@@ -273,6 +275,9 @@ def complete(ctx, walk, log, post, F_static, *, seeds: int = 0, progress=None):
     return pieces, records
 
 
+OWN_SKIP = 3
+"""First points of a seeded way up (beside the seed) that its way down is not checked on."""
+
 PARENT_STOP = "period one"
 """Why a way of a doubled branch stopped where it came back onto the orbit of the period
 it was born from (:func:`~gearjax._studies.sweep.doubling.back_on_parent`)."""
@@ -472,7 +477,7 @@ def trace_seed(ctx, plan, log, post, seed, number, atlas, done, progress):
     where a doubled branch came back onto the orbit it was born on), and each way's last
     point ``(K, eta, y, lambda)`` (``None`` for a way without points)."""
     s = _segment_at(plan, seed.f_hz)
-    pieces, stops, ends = [], [], []
+    pieces, stops, ends, own = [], [], [], None
     ways = (("+", range(s, len(plan))), ("-", range(s, -1, -1)))
     for sign, order in ways[1:] if seed.back_only else ways:
         forward = sign == "+"
@@ -489,7 +494,7 @@ def trace_seed(ctx, plan, log, post, seed, number, atlas, done, progress):
                 continue
             entered = (jnp.asarray(seed.y), RESULTS.successful, seed.lam) if n == 0 else None
             stop, joined = _trace_piece(ctx, log, key, K, previous, start, end, entered,
-                                        atlas, done, progress, number)
+                                        atlas, done, progress, number, own)
             pts = log.points(key)
             if pts:
                 parts.append(Piece(key=key, K=K, pts=pts, branch=number, reverse=not forward,
@@ -519,6 +524,10 @@ def trace_seed(ctx, plan, log, post, seed, number, atlas, done, progress):
         stops.append(stop)
         if stop == "closed_loop" and forward:
             break  # an isola: once round
+        if forward:  # a way up that stopped before it closed (a detour on an isola)
+            own = Atlas()
+            for k, p in enumerate(parts):
+                own.add(dataclasses.replace(p, pts=p.pts[OWN_SKIP * (k == 0):]))
     # the way down first (reversed), then the way up, so the branch reads in order
     down = [p for p in pieces if p.reverse]
     up = [p for p in pieces if not p.reverse]
@@ -526,11 +535,12 @@ def trace_seed(ctx, plan, log, post, seed, number, atlas, done, progress):
 
 
 def _trace_piece(ctx, log, key, K, previous, f_start, f_end, entered, atlas, done,
-                 progress, number):
+                 progress, number, own=None):
     """Continue one piece (journal segment ``key``) from ``f_start`` to ``f_end`` (Hz);
-    **Returns:** ``(stop word, why it ended on a known orbit)``: ``""`` (it did not),
-    ``"joined"`` (it met a traced branch) or :data:`PARENT_STOP` (a doubled branch came
-    back onto the orbit it was born on: the end record's ``onto``)."""
+    ``own``: an :class:`Atlas` of the branch's way up, for its way down. **Returns:**
+    ``(stop word, why it ended on a known orbit)``: ``""`` (it did not), ``"joined"`` (it
+    met a traced branch), ``"closed_loop"`` (it met ``own``: an isola) or
+    :data:`PARENT_STOP` (a doubled branch is back on its parent orbit): the end's ``onto``."""
     problem = ctx.problem(K)
     log.require_K(key, K)
     met = {"joined": False, "onto": None}
@@ -543,6 +553,9 @@ def _trace_piece(ctx, log, key, K, previous, f_start, f_end, entered, atlas, don
             # called after the point went to the log, for every point but a piece's first
             if ctx.eta > 1 and _doubling.back_on_parent(y, log.points(key)[-2]["y"], K, n):
                 met["joined"], met["onto"] = True, PARENT_STOP
+                return True
+            if own is not None and own.meets(K, np.append(y, lam), chord, ctx.eta):
+                met["joined"], met["onto"] = True, "closed_loop"
                 return True
             hit = atlas.meets(K, np.append(y, lam), chord, ctx.eta)
             met["joined"] |= hit
