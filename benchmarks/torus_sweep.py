@@ -19,7 +19,9 @@ frequency groups (a 3-torus), 0.05 mm backlash, a band of stage-A mesh frequency
 largest resident set).
 
     python benchmarks/torus_sweep.py [--case g2|g3] [--from HZ --to HZ] [--skip-periodic]
-        [--skip-scipy] [--out-dir DIR]
+        [--skip-scipy] [--once] [--out-dir DIR]
+
+``--once``: one sweep, not two (a long G = 3 run): its time includes compilation.
 
 Every number comes from this run on this machine; the ratios compare quantities measured
 in the same run.
@@ -71,10 +73,11 @@ def report(name, first, compile_s, result) -> None:
     P = ds.sizes["point"]
     solver = json.loads(ds.attrs["solver"])
     torus = solver.get("torus") or {}
+    second = ("(one run only)" if result is first else
+              f"after compile (second run) {result.seconds:.1f} s, "
+              f"{1e3 * result.seconds / P:.0f} ms per point")
     print(f"\n== {name}: {P} points; first run {first.seconds:.1f} s (compilation: tracing, "
-          f"lowering, XLA {compile_s:.1f} s of it); after compile (second run) "
-          f"{result.seconds:.1f} s, {1e3 * result.seconds / P:.0f} ms per point; stop: "
-          f"{result.stop}")
+          f"lowering, XLA {compile_s:.1f} s of it); {second}; stop: {result.stop}")
     print(f"torus: G = {torus.get('G')}, angle ratios {torus.get('angle_ratio_exact')}, "
           f"{torus.get('truncation')} sets; stability over {torus.get('return_turns')} turns "
           f"(drift {torus.get('return_drift', 0):.3f})")
@@ -101,7 +104,9 @@ def report(name, first, compile_s, result) -> None:
                   f"{np.nanmax(ds['separation'].values[keep][:, cols]):>8.3f}")
 
 
-def sweep_twice(train, f_from, f_to, min_points):
+def sweep_twice(train, f_from, f_to, min_points, once=False):
+    """The sweep run twice (``once``: one run, whose time includes compilation):
+    ``(first, compile seconds of the first, second)``."""
     compiled = _compile_seconds[0]
     first = gj.sweep(train, None, f_from, f_to, progress=gj.progress_printer(sys.stderr))
     compile_s = _compile_seconds[0] - compiled
@@ -113,6 +118,8 @@ def sweep_twice(train, f_from, f_to, min_points):
                          **kw)
     else:
         kw = {}
+    if once:
+        return first, compile_s, first
     result = gj.sweep(train, None, f_from, f_to, progress=gj.progress_printer(sys.stderr), **kw)
     return first, compile_s, result
 
@@ -214,6 +221,8 @@ def main() -> None:
     ap.add_argument("--from", dest="f_from", type=float)
     ap.add_argument("--to", dest="f_to", type=float)
     ap.add_argument("--min-points", type=int, default=None)
+    ap.add_argument("--once", action="store_true",
+                    help="one sweep (its time includes compilation), not two")
     ap.add_argument("--skip-periodic", action="store_true")
     ap.add_argument("--skip-scipy", action="store_true")
     ap.add_argument("--out-dir", default=".")
@@ -226,7 +235,7 @@ def main() -> None:
     min_points = args.min_points or (300 if args.case == "g2" else 100)
     print(f"{args.case}: {TRAINS[args.case].name}, {gj.threads()} threads, jax "
           f"{jax.__version__} on {jax.devices()[0].platform}")
-    first, compile_s, result = sweep_twice(train, f_from, f_to, min_points)
+    first, compile_s, result = sweep_twice(train, f_from, f_to, min_points, args.once)
     report(f"{args.case} sweep {f_from:.0f}-{f_to:.0f} Hz, 0.05 mm backlash", first, compile_s,
            result)
     gj.save_results(result.dataset, out / f"torus_{args.case}.nc")

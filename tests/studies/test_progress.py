@@ -86,6 +86,17 @@ def test_callbacks_of_two_arguments_still_work():
     assert _progress.with_branches(printer) is printer
 
 
+def test_printer_off_a_terminal_writes_a_line_per_25_points_also_where_it_jumps():
+    """A speculated segment or one taken from the journal reports many points at once:
+    the count passing a multiple of 25 writes a line, a count going back does not."""
+    stream = io.StringIO()
+    show = gj.progress_printer(stream)
+    for n in (1, 24, 25, 26, 49, 120, 119, 124, 130, 300):
+        show(n, 1000.0 + n)
+    counts = [int(line.split()[1]) for line in stream.getvalue().splitlines()]
+    assert counts == [25, 120, 130, 300]
+
+
 @pytest.mark.parametrize("json_flag", [[], ["--json"]])
 @pytest.mark.parametrize("terminal", [False, True])
 def test_sweep_command_writes_only_the_final_progress_line_unless_on_a_terminal(

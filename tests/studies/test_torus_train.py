@@ -11,6 +11,7 @@ One stiffness harmonic and orders (2, 2) keep the problems small (13 coefficient
 from __future__ import annotations
 
 import json
+import pathlib
 import warnings
 
 import numpy as np
@@ -118,3 +119,29 @@ def test_a_second_torus_sweep_compiles_nothing(train, full):
         jax.monitoring.unregister_event_duration_listener(listener)
     assert other.stop == "reached_end"
     assert len(compiles) == 0
+
+
+def test_cli_sweep_of_a_three_group_train(tmp_path, capsys):
+    """A 3-torus from the command line with the same flags: three stages whose mesh
+    frequencies share no small common base (tests/data/three_stage_incommensurate.toml,
+    one stiffness harmonic per mesh here), two orders per angle. The JSON names the three
+    angles and their exact ratios, every point converges, and the mean mesh forces of the
+    linear sweep are the static ones (the torus average of the equations of motion)."""
+    path = tmp_path / "three_h1.toml"
+    path.write_text((pathlib.Path(__file__).parent.parent / "data" /
+                     "three_stage_incommensurate.toml").read_text().replace(
+        "stiffness_harmonics = 4", "stiffness_harmonics = 1", 1))
+    code = main(["sweep", str(path), "--from", "3000", "--to", "3020", "--harmonics", "2",
+                 "--max-step", "10", "--linear", "--points", "3", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    torus = out["solver"]["torus"]
+    assert code == 0 and torus["G"] == 3 and len(torus["angle_ratio_exact"]) == 3
+    assert out["segments"][0][2] == [2, 2, 2]
+    assert len(out["points"]) >= 3 and all(p["converged"] for p in out["points"])
+    assert all(len(p["stage_mesh_frequency_hz"]) == 3 for p in out["points"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gj.GeometryWarning)
+        static = gj.static_mesh_forces(gj.gear_case(gj.load_train(path), torus=True).system)
+    for p in out["points"]:
+        mean = [m["mean_force"] for m in p["meshes"]]
+        np.testing.assert_allclose(mean, np.asarray(static), rtol=1e-6)

@@ -118,13 +118,16 @@ def with_branches(progress: Callable[..., None] | None) -> Callable[..., None] |
 def progress_printer(stream=sys.stderr) -> Callable[..., None]:
     """A ``progress(points_done, frequency_hz, branches=1)`` for
     :func:`gearjax._studies.sweep.sweep` that writes a line on ``stream``: rewritten in
-    place on a terminal, every 25 points otherwise. :func:`progress_bar` draws a bar
-    across the band instead."""
+    place on a terminal, otherwise each time the count passes a multiple of 25 (a
+    segment taken whole from the journal or from the speculation passes several at
+    once). :func:`progress_bar` draws a bar across the band instead."""
     tty = stream.isatty()
     t0 = time.perf_counter()
+    shown = [0]
 
     def show(n: int, f_hz: float, branches: int = 1) -> None:
-        if tty or n % 25 == 0:
+        if tty or n // 25 > shown[0] // 25:  # past a multiple of 25 (or several at once)
+            shown[0] = n
             end = "\r" if tty else "\n"
             stream.write(f"sweep: {n} points, at {f_hz:9.1f} Hz, {branches} "
                          f"branch{'es' if branches != 1 else ''}, "
