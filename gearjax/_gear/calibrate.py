@@ -23,7 +23,6 @@ from collections.abc import Mapping, Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.optimize
 
 from .assembly import assemble
 from .._config import require_x64
@@ -139,6 +138,7 @@ def calibrate(
                        "linear, undamped, mean-stiffness model without backlash): free "
                        "inertias, masses, stiffnesses or geometry instead")
 
+    import scipy.optimize  # on first use: its import costs every gearjax start
     fit = scipy.optimize.least_squares(
         lambda x: model.hz(x) / targets - 1.0,
         x0,

@@ -177,16 +177,8 @@ def verify_gear(
     solver = {"linear": linear, "reference_stage": case.stage,
               "mode": "sweep" if is_sweep else "points"}
     common = {"command": "" if command is None else command, "mode": solver["mode"]}
-    hb_ds = sweep_dataset(
-        hb["responses"], **case.point_coordinates(f_hz),
-        result=list(hb["result"]),
-        stable=hb["stable"],
-        static_force=case.F_static,
-        train_toml=dumps_train(case.train),
-        gear=case.gear.name,
-        solver={"method": "harmonic balance", "harmonics": harmonics, **solver},
-        attrs={"reference_stage": case.stage, "seconds": t_hb, **common},
-    )
+    hb_ds = _hb_dataset(case, f_hz, hb, {"method": "harmonic balance",
+                                         "harmonics": harmonics, **solver}, t_hb, common)
     hb_ds["harmonics"] = ("point", hb["harmonics"], {"units": "1",
                                                      "long_name": "solution harmonics K"})
     ni_ds = trajectory_dataset(case, f_hz, tr, {**solver_settings(settings), **solver},
@@ -221,18 +213,10 @@ def _verify_torus(case: GearCase, f_hz, is_sweep: bool, harmonics, tolerance: fl
     t_ni = time.perf_counter() - t0 - t_hb
     say(f"verify: integration done in {t_ni:.1f} s")
     common = {"command": "" if command is None else command, "mode": solver["mode"]}
-    hb_ds = sweep_dataset(
-        hb["responses"], **case.point_coordinates(f_hz),
-        result=list(hb["result"]),
-        stable=hb["stable"],
-        static_force=case.F_static,
-        train_toml=dumps_train(case.train),
-        gear=case.gear.name,
-        solver={"method": "torus harmonic balance", "harmonics": harmonics,
-                "truncation": _harmonics.TORUS_TRUNCATION, "torus": torus_fields(case),
-                **solver},
-        attrs={"reference_stage": case.stage, "seconds": t_hb, **common},
-    )
+    hb_ds = _hb_dataset(case, f_hz, hb, {
+        "method": "torus harmonic balance", "harmonics": harmonics,
+        "truncation": _harmonics.TORUS_TRUNCATION, "torus": torus_fields(case), **solver},
+        t_hb, common)
     hb_ds["harmonics"] = (("point", "angle"), hb["harmonics"], {
         "units": "1", "long_name": "orders K_g of the point's truncation set, per torus "
                                    "angle"})
@@ -244,6 +228,23 @@ def _verify_torus(case: GearCase, f_hz, is_sweep: bool, harmonics, tolerance: fl
                         seconds={"harmonic_balance": t_hb, "integration": t_ni,
                                  "total": time.perf_counter() - t0},
                         reference=window_reference(ni_solver))
+
+
+def _hb_dataset(case: GearCase, f_hz, hb: dict, solver: dict, seconds: float,
+                common: dict):
+    """The harmonic-balance side of a verification as a sweep dataset: the points of
+    ``hb`` (:func:`harmonic_balance_points`) at ``f_hz``, with ``solver`` and ``common``
+    attributes and the time ``seconds`` it took."""
+    return sweep_dataset(
+        hb["responses"], **case.point_coordinates(f_hz),
+        result=list(hb["result"]),
+        stable=hb["stable"],
+        static_force=case.F_static,
+        train_toml=dumps_train(case.train),
+        gear=case.gear.name,
+        solver=solver,
+        attrs={"reference_stage": case.stage, "seconds": seconds, **common},
+    )
 
 
 def window_reference(solver: dict) -> dict:

@@ -17,7 +17,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.optimize
 
 from ..._gear.train import Train
 from ..._gear.validate import assembly_slots, min_planet_gap_deg
@@ -134,6 +133,7 @@ def relax(train: Train, variables, paths, screen: Screen, freqs_hz,
         return float(val), np.asarray(grad, dtype=float)
 
     s0 = fun(z0)[0]
+    import scipy.optimize  # on first use: its import costs every gearjax start
     res = scipy.optimize.minimize(fun, z0, jac=True, method="L-BFGS-B",
                                   options={"maxiter": settings.relax_iterations})
     message = str(res.message)
