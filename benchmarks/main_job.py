@@ -104,8 +104,9 @@ def main() -> None:
     for k, name, wall, sweep_s, points, _ in rows:
         print(f"{k:>5} {name:<18} {wall:>7.1f} {sweep_s:>8.1f} {wall - sweep_s:>10.1f} "
               f"{points:>7}")
-    folds = rows[-1][5]
-    print(f"folds (Hz): {', '.join(f'{f:.0f}' for f in folds) if folds else 'none'}")
+    if not args.oscillator:
+        folds = rows[-1][5]
+        print(f"folds (Hz): {', '.join(f'{f:.0f}' for f in folds) if folds else 'none'}")
 
 
 if __name__ == "__main__":
