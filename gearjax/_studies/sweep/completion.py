@@ -287,16 +287,9 @@ def walked_pieces(ctx, walk, log, post) -> list[Piece]:
     """The walk's segments as pieces, numbered by branch as
     :func:`~gearjax._studies.sweep.dataset.point_data` numbers them (the point past a
     boundary that the next segment starts on left out), with their rows."""
-    out, branch = [], 0
-    problems, fresh = walk.problems, walk.fresh
-    for j, problem in enumerate(problems):
-        pts = log.points(j)
-        last = len(pts) - (j + 1 < len(problems) and j + 1 not in fresh
-                           and bool(log.points(j + 1)))
-        branch += j in fresh and j > 0
-        if last <= 0:
-            continue
-        piece = Piece(key=j, K=problem.settings.n_harmonics, pts=pts[:last], branch=branch,
+    out = []
+    for j, problem, pts, branch in _walk.walked_stretches(walk, log):
+        piece = Piece(key=j, K=problem.settings.n_harmonics, pts=pts, branch=branch,
                       eta=ctx.eta)
         piece.rows = post.rows(j, problem, ctx.omega_ref, piece.pts)
         out.append(piece)

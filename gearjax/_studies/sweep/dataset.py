@@ -16,7 +16,7 @@ from ..._io.results import (add_displacement_harmonics, add_displacement_waves,
 from .. import harmonics as _harmonics
 from .completion import piece_rows
 from .post import bifurcations, point_rows
-from .walk import exceeds
+from .walk import exceeds, walked_stretches
 
 
 def point_data(walk, log, post, ctx, F_static, *, linear: bool, pieces=None) -> dict:
@@ -30,27 +30,19 @@ def point_data(walk, log, post, ctx, F_static, *, linear: bool, pieces=None) -> 
 
     **Raises:** ``RuntimeError`` where the sweep found no point."""
     rows: list[dict] = []
-    branch = 0
-    problems, fresh = walk.problems, walk.fresh
     if pieces is not None:
         rows = [piece_rows(p) for p in pieces]
-        problems = []
-    for j, problem in enumerate(problems):
-        if linear:
+    elif linear:
+        for j, problem in enumerate(walk.problems):
             batch = log.batch(j)
             rows.append(point_rows(problem, jnp.asarray(batch["X"]),
                                    jnp.asarray(batch["omega"]),
                                    legacy_words(batch["result"], "hb"), F_static))
             rows[-1]["branch"] = np.zeros(len(batch["omega"]), int)
-            continue
-        pts = log.points(j)
-        last = len(pts) - (j + 1 < len(problems) and j + 1 not in fresh
-                           and bool(log.points(j + 1)))
-        branch += j in fresh and j > 0
-        if last <= 0:
-            continue
-        rows.append(post.rows(j, problem, ctx.omega_ref, pts[:last]))
-        rows[-1]["branch"] = np.full(last, branch)
+    else:
+        for j, problem, pts, branch in walked_stretches(walk, log):
+            rows.append(post.rows(j, problem, ctx.omega_ref, pts))
+            rows[-1]["branch"] = np.full(len(pts), branch)
     post.close()
     if not rows:
         raise RuntimeError(f"sweep produced no point: {walk.stop}")

@@ -121,6 +121,22 @@ def linear_segments(ctx, walk, log, points, progress, F_static) -> None:
             progress(walk.done, float(batch["omega"][-1]) * ctx.mu_ref / (2 * math.pi), 1)
 
 
+def walked_stretches(walk, log):
+    """The walk's segments in sweep order, as ``(j, problem, points, branch)``: segment
+    ``j``'s points without the last where the next segment continues from it (the point
+    past the boundary that the next one starts on), and the branch they belong to (a new
+    one after each restart); segments left with no point are skipped."""
+    branch = 0
+    problems, fresh = walk.problems, walk.fresh
+    for j, problem in enumerate(problems):
+        pts = log.points(j)
+        last = len(pts) - (j + 1 < len(problems) and j + 1 not in fresh
+                           and bool(log.points(j + 1)))
+        branch += j in fresh and j > 0
+        if last > 0:
+            yield j, problem, pts[:last], branch
+
+
 def walk_segment(ctx, walk, log, post, *, progress=None, entered=None, key=None,
                  cancel=None) -> bool:
     """Continue the next segment of ``walk`` (or take it from ``log``, where it is there)
