@@ -202,6 +202,16 @@ def band_of(result, lo: float, hi: float, settings: BandSettings,
         seconds=result.seconds if seconds is None else seconds)
 
 
+def complete_sweep(train: Train, gear: str, lo: float, hi: float, stage: str | None,
+                   settings: BandSettings):
+    """The complete :func:`gearjax.sweep` of ``gear`` with backlash from ``lo`` to ``hi``
+    (reference-stage Hz, reference stage ``stage``) with ``settings``
+    (:class:`BandSettings`). **Raises:** as :func:`gearjax.sweep`."""
+    return sweep(train, gear, lo, hi, stage=stage, harmonics=settings.harmonics,
+                 max_step_hz=settings.max_step_hz, max_points=settings.max_points,
+                 complete=True, seeds=settings.seeds)
+
+
 def nonlinear_band(train: Train, gear: str, lo: float, hi: float, *, stage: str | None = None,
                    settings: BandSettings = BandSettings(),
                    progress: Callable[[str], None] | None = None) -> NonlinearBand:
@@ -216,9 +226,7 @@ def nonlinear_band(train: Train, gear: str, lo: float, hi: float, *, stage: str 
     """
     t0 = time.perf_counter()
     try:
-        r = sweep(train, gear, lo, hi, stage=stage, harmonics=settings.harmonics,
-                  max_step_hz=settings.max_step_hz, max_points=settings.max_points,
-                  complete=True, seeds=settings.seeds)
+        r = complete_sweep(train, gear, lo, hi, stage, settings)
     except RuntimeError as e:  # no point at all: nothing counts
         if progress:
             progress(f"  complete sweep {lo:.0f}-{hi:.0f} Hz: no point ({e})")

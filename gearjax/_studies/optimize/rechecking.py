@@ -21,9 +21,8 @@ from ..._engine.time_domain import hb_initial_state
 from ..._gear.toml_io import dumps_train, loads_train
 from ..._io.results import displacement_coefficients
 from ..simulate import simulate_gear
-from ..sweep import sweep
 from ..verify import verify_gear
-from .nonlinear import NONLINEAR_RTOL, BandSettings, band_of
+from .nonlinear import NONLINEAR_RTOL, BandSettings, band_of, complete_sweep
 from .nonlinear import band_peak as band_peak
 from .result import OptimizeResult, verdict
 from .settings import check_band
@@ -194,8 +193,7 @@ def recheck(
                               "optimiser backlash peak (N)": nonlinear_peak})
             continue
         say(f"recheck: {name}, {settings.text()} with backlash {lo:g}-{hi:g} Hz")
-        sw = sweep(train, gear, lo, hi, stage=ref, harmonics=harmonics,
-                   max_step_hz=max_step_hz, max_points=max_points, complete=True, seeds=seeds)
+        sw = complete_sweep(train, gear, lo, hi, ref, settings)
         sweeps[name] = sw
         ds = sw.dataset
         band = bands[name] = band_of(sw, lo, hi, settings)
