@@ -104,11 +104,10 @@ def time_samples(n_harmonics: int, system: System, eta: int = 1, angle: int = 0)
     their sampling error falls about as T^-3: 16x oversampling keeps a doubling of T
     below 0.1% of the RMS forces (checked by tests/engine/test_hb_rules.py, and on a
     2-torus by tests/engine/test_torus.py). The grid of a torus is the product of its
-    angles': 16 per angle would make a 3-torus grid 4096 times a period's, and 8 per
-    angle keeps a doubling of every angle's samples below 0.1% of the RMS forces (on a
-    2-torus with 40% separation, tests/engine/test_torus.py; on the 70 : 81 train at
-    orders (4, 4) with 44% separation 32 x 32 samples are within 6e-4 of 256 x 256),
-    with an orbit about 2e-3 off the one 16 per angle gives.
+    angles': 16 per angle would make a 3-torus grid 4096 times a period's; 8 per angle
+    also keeps a doubling of every angle's samples below 0.1% of the RMS forces
+    (tests/engine/test_torus.py -k grid_rule), but its orbit is coarser pointwise, so a
+    2-torus keeps 16.
     """
     per = SAMPLES_PER_ORDER if system.n_angles <= 2 else DENSE_TORUS_SAMPLES_PER_ORDER
     need = per * max(n_harmonics, highest_excitation(system, eta, angle), 1)
