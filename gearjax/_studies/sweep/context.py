@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import jax.numpy as jnp
 import numpy as np
 
 from ..._engine import hb as _hb
@@ -32,14 +33,18 @@ class Context:
     runaway: np.ndarray
     problems: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)
 
-    def problem(self, K: int) -> _hb.HBProblem:
+    def problem(self, K: int, backlash: bool = True) -> _hb.HBProblem:
         """The harmonic-balance problem with ``K`` harmonics (orders per angle on a
-        torus; the same object for every segment of that K, in any thread)."""
+        torus; the same object for every segment of that K, in any thread); of the
+        system without its backlash where ``backlash`` is false."""
         K = _harmonics.as_orders(K)
-        if K not in self.problems:
-            self.problems[K] = _hb.hb_problem(self.system, _harmonics.settings_for(
-                self.system, K, eta=self.eta, smoothing=self.smoothing))
-        return self.problems[K]
+        key = K if backlash else (K, "no backlash")
+        if key not in self.problems:
+            system = self.system if backlash else dataclasses.replace(
+                self.system, backlash=jnp.zeros_like(self.system.backlash))
+            self.problems[key] = _hb.hb_problem(system, _harmonics.settings_for(
+                system, K, eta=self.eta, smoothing=self.smoothing))
+        return self.problems[key]
 
     def omega(self, f_hz: float) -> float:
         """Base frequency (rad/s) at reference-stage mesh frequency ``f_hz``."""

@@ -4,13 +4,13 @@ and doubled until the truncation estimate meets the target (:func:`checked_segme
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import warnings
 
 import jax.numpy as jnp
 import numpy as np
 
+from ..._engine import aft as _aft
 from ..._engine import hb as _hb
 from .. import harmonics as _harmonics
 from .starts import newton
@@ -69,6 +69,8 @@ def checked_segments(ctx, segments, F_static, *, fixed: bool):
     out, estimates = [], []
     for f_a, f_b, K in segments:
         angles = range(len(K)) if isinstance(K, tuple) else (0,)
+        solved = {}  # K -> the point at f_a (one solve serves every angle's check)
+        previous = None  # the K checked before, whose point starts a grown K's
         while True:
             grow = []
             for g in angles:
@@ -82,7 +84,10 @@ def checked_segments(ctx, segments, F_static, *, fixed: bool):
                         f"sweep: segment from {f_a:.1f} Hz with K = "
                         f"{_harmonics.orders_text(K)}: truncation{where} not checked ({skip})"))
                     continue
-                change, backlash = truncation_at(ctx, K, f_a, F_static, K2)
+                if K not in solved:
+                    solved[K] = checked_point(ctx, K, f_a, solved.get(previous))
+                previous = K
+                change, backlash = truncation_at(ctx, K, f_a, F_static, K2, solved[K])
                 estimates.append({"from_hz": float(f_a), "K": orders_json(K),
                                   "K_check": orders_json(K2),
                                   "change": None if not math.isfinite(change) else change,
@@ -116,21 +121,39 @@ def orders_json(K):
     return list(K) if isinstance(K, tuple) else int(K)
 
 
-def truncation_at(ctx, K, f_hz, F_static, K2=None) -> tuple[float, bool]:
-    """``(change, with backlash)``: the truncation estimate of the point at ``f_hz`` (Hz)
-    with K against ``K2`` (default 2K; the sweep's problems of those K), Newton from the
-    linear guess; where that fails with backlash (tooth separation far from contact), of
-    the system without backlash (the check then judges the time-varying stiffness only,
-    and says so: ``False``)."""
+def checked_point(ctx, K, f_hz, previous=None):
+    """``(problem, solution, with backlash)``: the point at ``f_hz`` (Hz) with the
+    sweep's problem of ``K``. From ``previous`` (the converged point of smaller orders
+    at ``f_hz``, a result of this function) where given: Newton from its unknowns padded
+    with zeros, on the same system. Else, or where that fails, Newton from the linear
+    guess; where that fails with backlash (tooth separation far from contact), the point
+    of the system without backlash (a check from it judges the time-varying stiffness
+    only, and says so: ``False``)."""
     omega = ctx.omega(f_hz)
-    problem, wide = ctx.problem(K), ctx.problem(_harmonics.widened(K, 0) if K2 is None else K2)
+    problem = ctx.problem(K)
+    if previous is not None and bool(previous[1].converged):
+        small, sol_small, backlash = previous
+        problem = ctx.problem(K, backlash)
+        y0 = _aft.resize(small.basis, problem.basis,
+                         np.asarray(sol_small.y).reshape(small.shape)).reshape(-1)
+        sol = newton(problem, jnp.asarray(omega), jnp.asarray(y0))
+        if bool(sol.converged):
+            return problem, sol, backlash
+        problem = ctx.problem(K)
     sol = newton(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
     if not bool(sol.converged) and problem.system.has_backlash:
-        lin = dataclasses.replace(problem.system,
-                                  backlash=jnp.zeros_like(problem.system.backlash))
-        problem, wide = (_hb.hb_problem(lin, p.settings) for p in (problem, wide))
+        problem = ctx.problem(K, backlash=False)
         sol = newton(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
-    backlash = problem.system.has_backlash
+    return problem, sol, problem.system.has_backlash
+
+
+def truncation_at(ctx, K, f_hz, F_static, K2=None, point=None) -> tuple[float, bool]:
+    """``(change, with backlash)``: the truncation estimate of the point at ``f_hz`` (Hz)
+    with K against ``K2`` (default 2K; the sweep's problems of those K) from ``point``
+    (default: :func:`checked_point`), whose system the wide problem shares."""
+    problem, sol, backlash = checked_point(ctx, K, f_hz) if point is None else point
+    K2 = _harmonics.widened(K, 0) if K2 is None else K2
+    wide = ctx.problem(K2, backlash)
     if not bool(sol.converged):
         return math.inf, backlash
-    return _harmonics.truncation_change(problem, wide, sol.y, omega, F_static), backlash
+    return _harmonics.truncation_change(problem, wide, sol.y, ctx.omega(f_hz), F_static), backlash
