@@ -163,6 +163,13 @@ def pair_index(basis: Basis) -> np.ndarray:
     return np.concatenate([[0], np.repeat(np.arange(1, basis.n_pairs + 1), 2)])
 
 
+def angle_index(basis: Basis) -> np.ndarray:
+    """Each sample's index along each angle, ``(G, T_1 ... T_G)`` (grid order): sample
+    ``s`` sits at angle ``2 pi angle_index[g, s] / T_g`` of angle ``g``."""
+    axes = [np.arange(T, dtype=np.int32) for T in basis.grid]
+    return np.stack([a.reshape(-1) for a in np.meshgrid(*axes, indexing="ij")])
+
+
 def angles(basis: Basis) -> np.ndarray:
     """The torus angles of the samples, ``(G, T_1 ... T_G)`` (rad), grid order."""
     axes = [2 * np.pi * np.arange(T) / T for T in basis.grid]

@@ -210,14 +210,20 @@ def excitation_on_grid(system: System, basis: _aft.Basis, eta: int = 1):
         kappa = stiffness_at_phases(system, eta, tau)
         te, te_rate = transmission_error(system.te_cos, system.te_sin, mu, tau)
         return kappa, te, te_rate * basis.rates[0]
-    theta = jnp.asarray(_aft.angles(basis))  # (G, T)
-    rows = jnp.asarray(system.mesh_angles, dtype=int)
-    per_angle = [(stiffness_series(system.k_cos, system.k_sin, mu, theta[g]),
-                  *transmission_error(system.te_cos, system.te_sin, mu, theta[g]))
-                 for g in range(basis.G)]
-    pick = lambda i: jnp.stack([a[i] for a in per_angle])[rows, jnp.arange(len(rows))]  # noqa: E731
-    rate = jnp.asarray(basis.rates)[rows][:, None]
-    return pick(0), pick(1), pick(2) * rate
+    # a mesh varies with its own angle only: its series along that angle's T_g samples,
+    # spread over the grid by each sample's index along the angle
+    rows = np.asarray(system.mesh_angles, dtype=int)
+    T_max = max(basis.grid)
+    per_angle = []
+    for T in basis.grid:
+        tau = 2 * np.pi * np.arange(T) / T
+        series = (stiffness_series(system.k_cos, system.k_sin, mu, tau),
+                  *transmission_error(system.te_cos, system.te_sin, mu, tau))
+        per_angle.append(jnp.stack([jnp.pad(a, ((0, 0), (0, T_max - T))) for a in series]))
+    own = jnp.stack(per_angle)[rows, :, np.arange(len(rows))]  # (m, 3, T_max)
+    where = jnp.asarray(_aft.angle_index(basis)[rows])  # (m, T)
+    kappa, te, te_rate = (jnp.take_along_axis(own[:, i], where, axis=1) for i in range(3))
+    return kappa, te, te_rate * jnp.asarray(basis.rates)[rows][:, None]
 
 
 def hb_problem(system: System, settings: HarmonicBalance = HarmonicBalance()) -> HBProblem:

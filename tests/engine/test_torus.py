@@ -9,6 +9,8 @@ forced on its own angle.
 
 from __future__ import annotations
 
+import pathlib
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -20,6 +22,7 @@ from gearjax._engine import hb as _hb
 from gearjax._engine.newton import newton
 
 ROOT2 = float(np.sqrt(2.0))
+DATA = pathlib.Path(__file__).resolve().parents[1] / "data"
 
 
 def two_angle_system(backlash=0.0, eps=0.2, amp=(0.05, 0.04)):
@@ -147,3 +150,43 @@ def test_torus_refusals():
         _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=(4, 4, 4)))
     with pytest.raises(ValueError, match="truncation"):
         _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=4, truncation="ball"))
+
+
+def test_excitation_on_a_torus_grid_is_each_meshs_series_at_its_own_angle():
+    # three groups, stiffness harmonics on every mesh, unequal samples per angle: every
+    # sample of every mesh against the series evaluated at that sample's own angle
+    train = gj.load_train(DATA / "three_stage_incommensurate.toml")
+    system = gj.gear_case(train, torus=True).system
+    basis = _hb.harmonic_basis(system, gj.harmonics_settings(system, (4, 5, 6)))
+    assert len(set(basis.grid)) > 1
+    kappa, te, te_rate = _hb.excitation_on_grid(system, basis)
+    theta = _aft.angles(basis)[np.asarray(system.mesh_angles)]  # (m, T)
+    mu = np.asarray(system.mesh_mu, float)
+    h = np.arange(1, system.k_cos.shape[1] + 1)
+    arg = mu[:, None, None] * h[None, :, None] * theta[:, None, :]
+    expected = 1 + np.sum(np.asarray(system.k_cos)[:, :, None] * np.cos(arg)
+                          + np.asarray(system.k_sin)[:, :, None] * np.sin(arg), axis=1)
+    assert kappa.shape == theta.shape
+    np.testing.assert_allclose(np.asarray(kappa), expected, rtol=0, atol=1e-12)
+    assert np.ptp(expected) > 0.1  # the stiffness does vary
+    np.testing.assert_array_equal(np.asarray(te), 0.0)  # the train gives no error
+
+    # transmission error and its rate, angle rates 1 and sqrt(2), grids 10 and 14
+    te_cos, te_sin = np.array([[1e-6, 2e-7], [0.0, 3e-7]]), np.array([[0.0, 5e-7], [4e-7, 0.0]])
+    base = two_angle_system()
+    system = gj.system_from_matrices(
+        base.M, base.C, base.K, base.W, base.kbar, damping=base.damping, mesh_mu=[2, 3],
+        k_cos=[[0.2], [0.1]], te_cos=te_cos, te_sin=te_sin, mesh_angle=[0, 1],
+        f_mean=base.f_mean, angle_ratio=[1.0, ROOT2])
+    basis = _aft.torus_basis((2, 3), (10, 14), (1.0, ROOT2))
+    _, te, te_rate = _hb.excitation_on_grid(system, basis)
+    theta = _aft.angles(basis)  # meshes 0 and 1 on angles 0 and 1
+    arg = np.array([2.0, 3.0])[:, None, None] * np.arange(1, 3)[None, :, None] * theta[:, None, :]
+    e = np.sum(te_cos[:, :, None] * np.cos(arg) + te_sin[:, :, None] * np.sin(arg), axis=1)
+    rate = np.array([2.0, 3.0])[:, None] * np.arange(1, 3)[None, :]
+    de = np.sum(rate[:, :, None] * (te_sin[:, :, None] * np.cos(arg)
+                                    - te_cos[:, :, None] * np.sin(arg)), axis=1)
+    np.testing.assert_allclose(np.asarray(te), e, rtol=0, atol=1e-18)
+    # d e / d t over omega_0: along angle g the phase turns at rate g's rate
+    np.testing.assert_allclose(np.asarray(te_rate), de * np.array([1.0, ROOT2])[:, None],
+                               rtol=1e-12, atol=1e-18)
