@@ -60,6 +60,7 @@ from jaxtyping import Array, Float, Int
 
 from .._config import require_x64
 from . import aft as _aft
+from .integrator import Integrator
 from .mesh_force import mesh_force, stiffness_series, transmission_error
 from .results import RESULTS
 from .static import static_deflection
@@ -67,17 +68,15 @@ from .system import System
 
 
 
-class TimeDomain(eqx.Module):
+class TimeDomain(Integrator):
     """Time-integration settings (static: they are compile keys).
 
     **Fields:**
 
-    - ``solver``: a diffrax solver (default ``Dopri8()``, see the module docstring);
-    - ``rtol``, ``atol``: step-size controller tolerances on the scaled state (units
-      of the characteristic mesh length); ``pcoeff``, ``icoeff``: PI coefficients of
-      ``diffrax.PIDController`` (use 0.3, 0.3 with an implicit solver);
-    - ``max_steps``: diffrax steps allowed per base period (a point that needs
-      more ends with ``max_steps``);
+    - ``solver``, ``rtol``, ``atol``, ``pcoeff``, ``icoeff``, ``max_steps``: the ODE
+      solver and its step-size controller
+      (:class:`~gearjax._engine.integrator.Integrator`; a point that needs more than
+      ``max_steps`` steps a base period ends with ``max_steps``);
     - ``n_samples``: uniform samples per base period in the returned trajectory;
     - ``sample_periods``: base periods sampled at the end (set it to a found
       sub-harmonic period to get that orbit's responses);
@@ -93,12 +92,6 @@ class TimeDomain(eqx.Module):
       shorter period (so integration noise near the tolerance is not a sub-harmonic).
     """
 
-    solver: dfx.AbstractSolver = dfx.Dopri8()
-    rtol: float = eqx.field(static=True, default=1e-8)
-    atol: float = eqx.field(static=True, default=1e-8)
-    pcoeff: float = eqx.field(static=True, default=0.0)
-    icoeff: float = eqx.field(static=True, default=1.0)
-    max_steps: int = eqx.field(static=True, default=50_000)
     n_samples: int = eqx.field(static=True, default=512)
     sample_periods: int = eqx.field(static=True, default=1)
     max_periods: int = eqx.field(static=True, default=100)
@@ -106,15 +99,14 @@ class TimeDomain(eqx.Module):
     max_subharmonic: int = eqx.field(static=True, default=8)
 
     def __check_init__(self):
-        for name in ("max_steps", "n_samples", "sample_periods", "max_periods",
+        for name in ("n_samples", "sample_periods", "max_periods",
                      "max_subharmonic"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"TimeDomain.{name} must be a positive integer, not "
                                  f"{getattr(self, name)!r}.")
-        for name in ("rtol", "atol", "periodic_tol"):
-            if not float(getattr(self, name)) > 0:
-                raise ValueError(f"TimeDomain.{name} must be positive, not "
-                                 f"{getattr(self, name)!r}.")
+        if not float(self.periodic_tol) > 0:
+            raise ValueError(f"TimeDomain.periodic_tol must be positive, not "
+                             f"{self.periodic_tol!r}.")
 
 
 class Trajectory(eqx.Module):

@@ -59,6 +59,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .._config import require_x64
+from .integrator import Integrator
 from .responses import MeshResponses, responses_from_samples, static_mesh_forces
 from .results import RESULTS
 from .system import System
@@ -72,13 +73,13 @@ _WHOLE = 1e-9
 """Relative distance from a whole number below which a frequency counts as whole."""
 
 
-class Windowed(eqx.Module):
+class Windowed(Integrator):
     """Settings of the windowed integration (static: they are compile keys).
 
     **Fields:**
 
     - ``solver``, ``rtol``, ``atol``, ``pcoeff``, ``icoeff``: the ODE solver and its
-      step-size controller, as :class:`~gearjax._engine.time_domain.TimeDomain`;
+      step-size controller (:class:`~gearjax._engine.integrator.Integrator`);
     - ``max_steps``: solver steps allowed per base period (a window of ``N`` periods
       gets ``N max_steps``; a window that needs more ends with ``max_steps_reached``);
     - ``n_beats``: cycles of the slowest non-integer beat a window spans (module
@@ -93,12 +94,6 @@ class Windowed(eqx.Module):
       commensurate pair of frequencies asks for a longer one: refused).
     """
 
-    solver: dfx.AbstractSolver = dfx.Dopri8()
-    rtol: float = eqx.field(static=True, default=1e-8)
-    atol: float = eqx.field(static=True, default=1e-8)
-    pcoeff: float = eqx.field(static=True, default=0.0)
-    icoeff: float = eqx.field(static=True, default=1.0)
-    max_steps: int = eqx.field(static=True, default=50_000)
     n_beats: int = eqx.field(static=True, default=100)
     min_periods: int = eqx.field(static=True, default=1)
     samples_per_cycle: int = eqx.field(static=True, default=16)
@@ -109,7 +104,7 @@ class Windowed(eqx.Module):
     max_window_periods: int = eqx.field(static=True, default=100_000)
 
     def __check_init__(self):
-        for name in ("max_steps", "n_beats", "min_periods", "samples_per_cycle", "n_agree",
+        for name in ("n_beats", "min_periods", "samples_per_cycle", "n_agree",
                      "max_windows", "max_window_periods"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"Windowed.{name} must be a positive integer, not "
@@ -117,10 +112,8 @@ class Windowed(eqx.Module):
         if int(self.transient_windows) < 0:
             raise ValueError(f"Windowed.transient_windows must be zero or more, not "
                              f"{self.transient_windows!r}.")
-        for name in ("rtol", "atol", "tol"):
-            if not float(getattr(self, name)) > 0:
-                raise ValueError(f"Windowed.{name} must be positive, not "
-                                 f"{getattr(self, name)!r}.")
+        if not float(self.tol) > 0:
+            raise ValueError(f"Windowed.tol must be positive, not {self.tol!r}.")
         need = self.transient_windows + self.n_agree + 1
         if self.max_windows < need:
             raise ValueError(f"Windowed.max_windows = {self.max_windows} leaves no room for "
