@@ -14,10 +14,10 @@ class Integrator(eqx.Module):
     settings share (static: they are compile keys).
 
     **Fields:** ``solver``: a diffrax solver (default ``Dopri8()``: see
-    :mod:`gearjax._engine.time_domain` for the choice); ``rtol``, ``atol``: step-size controller tolerances on the scaled state
-    (units of the characteristic mesh length); ``pcoeff``, ``icoeff``: PI coefficients of
-    ``diffrax.PIDController`` (use 0.3, 0.3 with an implicit solver); ``max_steps``:
-    diffrax steps allowed per base period.
+    :mod:`gearjax._engine.time_domain` for the choice); ``rtol``, ``atol``: step-size
+    controller tolerances on the scaled state (units of the characteristic mesh length);
+    ``pcoeff``, ``icoeff``: PI coefficients of ``diffrax.PIDController`` (use 0.3, 0.3
+    with an implicit solver); ``max_steps``: diffrax steps allowed per base period.
 
     **Raises:** ``ValueError`` for a ``max_steps`` below 1 or a tolerance not positive.
     """
