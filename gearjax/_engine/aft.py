@@ -172,8 +172,8 @@ def angle_index(basis: Basis) -> np.ndarray:
 
 def angles(basis: Basis) -> np.ndarray:
     """The torus angles of the samples, ``(G, T_1 ... T_G)`` (rad), grid order."""
-    axes = [2 * np.pi * np.arange(T) / T for T in basis.grid]
-    return np.stack([a.reshape(-1) for a in np.meshgrid(*axes, indexing="ij")])
+    T = np.asarray(basis.grid, dtype=float)[:, None]
+    return 2 * np.pi * angle_index(basis) / T
 
 
 # ------------------------------------------------------------ the AFT on the torus

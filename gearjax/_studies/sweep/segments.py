@@ -147,12 +147,11 @@ def checked_point(ctx, K, f_hz, previous=None):
     return problem, sol, problem.system.has_backlash
 
 
-def truncation_at(ctx, K, f_hz, F_static, K2=None, point=None) -> tuple[float, bool]:
-    """``(change, with backlash)``: the truncation estimate of the point at ``f_hz`` (Hz)
-    with K against ``K2`` (default 2K; the sweep's problems of those K) from ``point``
-    (default: :func:`checked_point`), whose system the wide problem shares."""
-    problem, sol, backlash = checked_point(ctx, K, f_hz) if point is None else point
-    K2 = _harmonics.widened(K, 0) if K2 is None else K2
+def truncation_at(ctx, K, f_hz, F_static, K2, point) -> tuple[float, bool]:
+    """``(change, with backlash)``: the truncation estimate of ``point`` (the point at
+    ``f_hz`` (Hz) with K, :func:`checked_point`) against the sweep's problem of ``K2`` on
+    the same system (with or without backlash)."""
+    problem, sol, backlash = point
     wide = ctx.problem(K2, backlash)
     if not bool(sol.converged):
         return math.inf, backlash
