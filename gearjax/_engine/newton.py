@@ -6,9 +6,14 @@ lineax solver on an operator built from the iterate (for the harmonic balance
 :class:`~gearjax._engine.linear_solver.CondensedLU`); ``chord`` factorises once, at the
 start. Its test: the scaled step below ``rtol max(1, max |y|)`` and the residual below
 ``sqrt(rtol)`` (max norms), both at the iterate the step is taken from; the step is
-taken either way. A non-finite step stops the iteration at the last finite iterate.
-Results are optimistix's, promoted into :class:`gearjax._engine.results.RESULTS`:
-``successful``, ``nonlinear_max_steps_reached`` or ``nonfinite``.
+taken either way. A non-finite step stops the iteration at the last finite iterate;
+:data:`PATIENCE` steps in a row without a new lowest residual stop it as diverging (full
+Newton steps on a residual with backlash, which is smooth between changes of contact,
+converge in a few steps once the contact pattern is right; steps that keep failing to
+lower the residual cycle between patterns, and the remaining ones would be spent for
+nothing). Results are optimistix's, promoted into
+:class:`gearjax._engine.results.RESULTS`: ``successful``, ``nonlinear_max_steps_reached``,
+``nonlinear_divergence`` or ``nonfinite``.
 """
 
 from __future__ import annotations
@@ -27,14 +32,21 @@ from . import hb as _hb
 from .linear_solver import CondensedLU, HBJacobian
 from .results import RESULTS
 
+PATIENCE = 8
+"""Newton steps in a row without a new lowest residual (max norm) after which
+:class:`FactorisedNewton` stops as diverging (module docstring)."""
+
 
 class _NewtonState(eqx.Module):
     """Root-finder state: the chord's solver state (``None`` for Newton), whether the
-    last step met the test, whether it was non-finite."""
+    last step met the test, whether it was non-finite; the lowest residual so far and the
+    steps since it."""
 
     linear_state: Any
     converged: Array
     nonfinite: Array
+    best: Array
+    stalled: Array
 
 
 class FactorisedNewton(optx.AbstractRootFinder):
@@ -43,14 +55,16 @@ class FactorisedNewton(optx.AbstractRootFinder):
     **Fields:** ``rtol``: tolerance of the scaled step (relative to ``max(1, max |y|)``)
     and, as ``sqrt(rtol)``, of the residual; ``operator``: ``(y, args) ->`` the
     Jacobian at ``y`` as a lineax operator; ``linear_solver``: the lineax solver for it;
-    ``chord``: factorise at the start only. ``atol`` and ``norm`` are the
-    ``optimistix`` interface: the test above is this solver's own.
+    ``chord``: factorise at the start only; ``patience``: steps without a new lowest
+    residual before it stops as diverging (:data:`PATIENCE`). ``atol`` and ``norm`` are
+    the ``optimistix`` interface: the test above is this solver's own.
     """
 
     rtol: float
     operator: Callable = eqx.field(static=True)
     linear_solver: lx.AbstractLinearSolver = CondensedLU()
     chord: bool = eqx.field(static=True, default=False)
+    patience: int = eqx.field(static=True, default=PATIENCE)
     atol: float = 0.0
     norm: Callable = eqx.field(static=True, default=optx.max_norm)
 
@@ -60,7 +74,8 @@ class FactorisedNewton(optx.AbstractRootFinder):
         if self.chord:
             linear_state = self.linear_solver.init(self.operator(y, args), {})
         false = jnp.asarray(False)
-        return _NewtonState(linear_state=linear_state, converged=false, nonfinite=false)
+        return _NewtonState(linear_state=linear_state, converged=false, nonfinite=false,
+                            best=jnp.asarray(jnp.inf, dtype=y.dtype), stalled=jnp.asarray(0))
 
     def step(self, fn, y, args, options, state, tags):
         del options, tags
@@ -75,16 +90,22 @@ class FactorisedNewton(optx.AbstractRootFinder):
         y_new = y + step
         finite = jnp.all(jnp.isfinite(y_new))
         small = jnp.max(jnp.abs(step)) <= self.rtol * jnp.maximum(1.0, jnp.max(jnp.abs(y)))
-        converged = finite & small & (jnp.max(jnp.abs(r)) <= jnp.sqrt(self.rtol))
+        size = jnp.max(jnp.abs(r))
+        converged = finite & small & (size <= jnp.sqrt(self.rtol))
+        lower = size < state.best
         new_state = _NewtonState(linear_state=state.linear_state, converged=converged,
-                                 nonfinite=~finite)
+                                 nonfinite=~finite, best=jnp.where(lower, size, state.best),
+                                 stalled=jnp.where(lower, 0, state.stalled + 1))
         return jnp.where(finite, y_new, y), new_state, aux
 
     def terminate(self, fn, y, args, options, state, tags):
         del fn, y, args, options, tags
-        result = optx.RESULTS.where(state.nonfinite, optx.RESULTS.nonfinite,
-                                    optx.RESULTS.successful)
-        return state.converged | state.nonfinite, result
+        diverging = ~state.converged & (state.stalled >= self.patience)
+        result = optx.RESULTS.where(
+            state.nonfinite, optx.RESULTS.nonfinite,
+            optx.RESULTS.where(diverging, optx.RESULTS.nonlinear_divergence,
+                               optx.RESULTS.successful))
+        return state.converged | state.nonfinite | diverging, result
 
     def postprocess(self, fn, y, aux, args, options, state, tags, result):
         del fn, args, options, state, tags, result
@@ -120,8 +141,9 @@ def newton(problem: _hb.HBProblem, omega, y0: Array) -> _hb.HBSolution:
 
     Stops when the scaled step and residual are below ``problem.settings.rtol``
     (``RESULTS.successful``), after ``settings.max_steps``
-    (``nonlinear_max_steps_reached``), or on a non-finite value, keeping the last finite
-    iterate (``nonfinite``): never NaN silently. Each
+    (``nonlinear_max_steps_reached``), after :data:`PATIENCE` steps without a new lowest
+    residual (``nonlinear_divergence``), or on a non-finite value, keeping the last
+    finite iterate (``nonfinite``): never NaN silently. Each
     step factorises the Jacobian condensed to the motions that deflect a mesh
     (:class:`~gearjax._engine.linear_solver.CondensedLU`).
     """

@@ -157,3 +157,28 @@ def test_structured_jacobian_with_smoothed_backlash(paper_system_h1):
     J = _hb.jacobian(problem, y, omega)
     J_ad = jax.jacfwd(lambda v: _hb.residual(problem, v, omega))(y)
     np.testing.assert_allclose(J, J_ad, atol=1e-13 * float(jnp.max(jnp.abs(J_ad))))
+
+
+def test_newton_stops_as_diverging_when_its_residual_stops_falling():
+    """Newton on ``y^3 - 2 y + 2`` from 0 cycles 0 -> 1 -> 0 (residuals 2, 1, 2, 1, ...):
+    it stops after ``PATIENCE`` steps without a new lowest residual as
+    ``nonlinear_divergence``, not after ``max_steps``; from -2 it converges to the root
+    near -1.7693 (``successful``), the patience unused."""
+    import lineax as lx
+    import optimistix as optx
+
+    def fn(y, args):
+        return y**3 - 2 * y + 2, None
+
+    def operator(y, args):
+        return lx.MatrixLinearOperator(jnp.diag(3 * y**2 - 2))
+
+    solver = _newton.FactorisedNewton(rtol=1e-12, operator=operator, linear_solver=lx.LU())
+    cycling = optx.root_find(fn, solver, jnp.zeros(1), max_steps=40, throw=False,
+                             has_aux=True)
+    assert cycling.result == optx.RESULTS.nonlinear_divergence
+    assert int(cycling.stats["num_steps"]) == _newton.PATIENCE + 2  # best at step 2
+    root = optx.root_find(fn, solver, jnp.full(1, -2.0), max_steps=40, throw=False,
+                          has_aux=True)
+    assert root.result == optx.RESULTS.successful
+    assert abs(float(root.value[0]) + 1.76929235423863) < 1e-12
