@@ -54,6 +54,7 @@ as segments named ``"b{branch}{+|-}{piece}"``; the seeds themselves are found ag
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import jax
@@ -64,6 +65,7 @@ from ..._engine import aft as _aft
 from ..._engine import continuation as _continuation
 from ..._engine import time_domain as _time_domain
 from ..._engine.results import RESULTS, result_from_word
+from .. import concurrency
 from . import doubling as _doubling
 from . import starts as _starts
 from . import walk as _walk
@@ -244,7 +246,10 @@ def complete(ctx, walk, log, post, F_static, *, seeds: int = 0, progress=None):
         atlas.add(piece)
     records = branch_records(ctx, walk, pieces)
     done = {"points": walk.done}
-    queue = restart_seeds(ctx, pieces) + [_far_end(ctx, plan)] + jump_seeds(ctx, plan, pieces)
+    # the far end and the first jumps (time integrations, then Newton) side by side
+    first = seeds_in_threads([functools.partial(_far_end, ctx, plan)]
+                             + jump_jobs(ctx, plan, pieces))
+    queue = restart_seeds(ctx, pieces) + [s for s in first if s is not None]
     queue += _doubling.doubling_points(periods, pieces, records)
     if seeds:
         queue += integration_seeds(ctx, plan, seeds)
@@ -364,9 +369,28 @@ def _far_end(ctx, plan) -> Seed | None:
                 f_hz=float(ctx.to_hz))
 
 
+SEED_THREAD = "gearjax-seed"
+"""Name of the threads that find the completion's seeds side by side."""
+
+
+def seeds_in_threads(jobs) -> list:
+    """Each of ``jobs`` (callables returning a :class:`Seed` or None) called, side by side
+    in up to :func:`gearjax._studies.concurrency.threads` threads; results in the order
+    of ``jobs`` (each job is independent of the others: the same seeds as one after
+    the other)."""
+    return concurrency.map_in_threads(lambda job: job(), jobs, SEED_THREAD)
+
+
 def jump_seeds(ctx, plan, pieces) -> list[Seed]:
     """Where each stable stretch of the branches of ``pieces`` ends, the orbit a rig
-    sweeping on settles to (module docstring), in frequency order along each branch."""
+    sweeping on settles to (module docstring), in frequency order along each branch
+    (:func:`jump_jobs`, found side by side)."""
+    return [s for s in seeds_in_threads(jump_jobs(ctx, plan, pieces)) if s is not None]
+
+
+def jump_jobs(ctx, plan, pieces) -> list:
+    """The jumps of :func:`jump_seeds` as callables, each returning its :class:`Seed` or
+    None."""
     out = []
     by_branch: dict[int, list[Piece]] = {}
     for p in pieces:
@@ -384,9 +408,8 @@ def jump_seeds(ctx, plan, pieces) -> list[Seed]:
                 nxt = last + step
                 if not (stable[last] and not stable[nxt]):
                     continue
-                seed = _jump(ctx, plan, lam, mult, X, last, step, parts[0].eta, Ks[last])
-                if seed is not None:
-                    out.append(seed)
+                out.append(functools.partial(_jump, ctx, plan, lam, mult, X, last, step,
+                                             parts[0].eta, Ks[last]))
     return out
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 
 import jax.numpy as jnp
 import numpy as np
@@ -32,6 +33,8 @@ class Context:
     max_detour: int
     runaway: np.ndarray
     problems: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)
+    lock: threading.Lock = dataclasses.field(default_factory=threading.Lock, compare=False,
+                                             repr=False)
 
     def problem(self, K: int, backlash: bool = True) -> _hb.HBProblem:
         """The harmonic-balance problem with ``K`` harmonics (orders per angle on a
@@ -39,12 +42,13 @@ class Context:
         system without its backlash where ``backlash`` is false."""
         K = _harmonics.as_orders(K)
         key = K if backlash else (K, "no backlash")
-        if key not in self.problems:
-            system = self.system if backlash else dataclasses.replace(
-                self.system, backlash=jnp.zeros_like(self.system.backlash))
-            self.problems[key] = _hb.hb_problem(system, _harmonics.settings_for(
-                system, K, eta=self.eta, smoothing=self.smoothing))
-        return self.problems[key]
+        with self.lock:  # built once though threads ask at once
+            if key not in self.problems:
+                system = self.system if backlash else dataclasses.replace(
+                    self.system, backlash=jnp.zeros_like(self.system.backlash))
+                self.problems[key] = _hb.hb_problem(system, _harmonics.settings_for(
+                    system, K, eta=self.eta, smoothing=self.smoothing))
+            return self.problems[key]
 
     def omega(self, f_hz: float) -> float:
         """Base frequency (rad/s) at reference-stage mesh frequency ``f_hz``."""
