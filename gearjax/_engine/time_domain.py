@@ -295,6 +295,10 @@ def contact_state(system: System):
     return x0, jnp.zeros_like(x0)
 
 
+contact_state_jit = eqx.filter_jit(contact_state)
+""":func:`contact_state`, compiled (one program instead of its operations one by one)."""
+
+
 def hb_initial_state(X: Float[Array, "C n"], omega, eta: int = 1, basis=None):
     """State at ``t = 0`` of a harmonic-balance solution.
 
@@ -486,6 +490,12 @@ def simulate(system: System, omega, *, x0=None, v0=None,
     **Raises:** ``ValueError`` for a quasi-periodic ``system`` (:func:`require_periodic`).
     """
     require_periodic(system, "simulate")
+    # both start arrays always given: one compiled program whatever the caller passes
+    if x0 is None:
+        x0, zero = contact_state_jit(system)
+        v0 = zero if v0 is None else v0
+    elif v0 is None:
+        v0 = np.zeros(np.shape(x0))
     return _simulate(system, *_arrays(omega, x0, v0), settings)
 
 

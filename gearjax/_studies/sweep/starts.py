@@ -146,7 +146,7 @@ def _settled_on_torus(problem, omega, state=None) -> _hb.HBSolution:
     top = float(np.max(np.abs(_aft.frequency_numbers(basis))))
     count = max(4 * basis.n_coefficients, math.ceil(4 * top * turns))
     tau = 2 * np.pi * (SETTLE_PERIODS + turns * np.arange(1, count + 1) / count)
-    x0, v0 = _time_domain.contact_state(system) if state is None else state
+    x0, v0 = _time_domain.contact_state_jit(system) if state is None else state
     settings = _time_domain.TimeDomain(rtol=SETTLE_RTOL, atol=SETTLE_RTOL)
     x, _, ok = _time_domain.sample_trajectory(system, omega, x0, v0, tau, settings)
     if not bool(ok) or not bool(jnp.all(jnp.isfinite(x))):
