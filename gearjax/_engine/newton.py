@@ -150,8 +150,15 @@ def newton(problem: _hb.HBProblem, omega, y0: Array) -> _hb.HBSolution:
     return _iterate(problem, jnp.asarray(omega, dtype=float), y0, chord=False)
 
 
-newton_jit = jax.jit(newton)
-""":func:`newton`, compiled (one cache of programs for every caller)."""
+_newton_compiled = jax.jit(newton)
+
+
+def newton_jit(problem: _hb.HBProblem, omega, y0: Array) -> _hb.HBSolution:
+    """:func:`newton`, compiled (one cache of programs for every caller): ``omega`` and
+    ``y0`` are passed on as float64 arrays of fixed (strong) type, so that a Python
+    float and a NumPy float do not compile two programs."""
+    return _newton_compiled(problem, jnp.asarray(omega, dtype=jnp.float64),
+                            jnp.asarray(y0, dtype=jnp.float64))
 
 
 def solve_linear(problem: _hb.HBProblem, omega, y0: Array | None = None) -> _hb.HBSolution:
