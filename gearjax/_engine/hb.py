@@ -232,8 +232,17 @@ def hb_problem(system: System, settings: HarmonicBalance = HarmonicBalance()) ->
     **Raises:** ``ValueError`` where the discretisation cannot hold the excitation
     (:func:`harmonic_basis`).
     """
-    eta = settings.eta
     basis = harmonic_basis(system, settings)
+    kappa, te, te_rate, forcing, x_scale, length = _problem_arrays(system, basis, settings.eta)
+    return HBProblem(system=system, settings=settings, basis=basis, n_time=basis.n_samples,
+                     kappa=kappa, te=te, te_rate=te_rate, forcing=forcing, x_scale=x_scale,
+                     length=length, mesh_null=mesh_null_space(system.W))
+
+
+@eqx.filter_jit
+def _problem_arrays(system: System, basis: _aft.Basis, eta: int):
+    """The arrays of :func:`hb_problem`, in one compiled program (its operations one by
+    one would each be a program of their own to trace and load)."""
     kappa, te, te_rate = excitation_on_grid(system, basis, eta)
     forcing = _aft.torus_place(basis, system.f_cos, system.f_sin,
                                [o * eta for o in system.forcing_mu], system.forcing_angles)
@@ -243,9 +252,7 @@ def hb_problem(system: System, settings: HarmonicBalance = HarmonicBalance()) ->
     length = jnp.max(jnp.concatenate([system.backlash, p_static, jnp.array([1e-12])]))
     lever = jnp.max(jnp.abs(system.W), axis=0) if system.n_meshes else jnp.ones(system.n_dof)
     x_scale = length / jnp.where(lever > 0, lever, 1.0)
-    return HBProblem(system=system, settings=settings, basis=basis, n_time=basis.n_samples,
-                     kappa=kappa, te=te, te_rate=te_rate, forcing=forcing, x_scale=x_scale,
-                     length=length, mesh_null=mesh_null_space(system.W))
+    return kappa, te, te_rate, forcing, x_scale, length
 
 
 def mesh_null_space(W) -> Array | None:
