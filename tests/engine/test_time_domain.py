@@ -230,3 +230,21 @@ def test_paper_first_gear_agrees_with_harmonic_balance():
             separated = np.mean(np.abs(np.asarray(tr.p)) <= np.asarray(paper.backlash)[:, None],
                                 axis=1)
             assert separated.max() > 0.05
+
+
+def test_simulate_compiles_one_program_whatever_start_it_is_given(monkeypatch):
+    """The contact state, a given position, and a given position and rate: one trace of
+    the integration (a second program per kind of start would be compiled again in every
+    process: integration programs are never kept in the persistent cache)."""
+    traces = []
+    original = td._steady_state
+    monkeypatch.setattr(td, "_steady_state", lambda *a: traces.append(1) or original(*a))
+    system = oscillator(clearance=0.3)
+    settings = gj.TimeDomain(max_periods=3, n_samples=16, rtol=1e-5, atol=1e-5)
+    x_contact, v_contact = (np.asarray(a) for a in td.contact_state(system))
+    ends = [gj.simulate(system, 0.8, settings=settings).x_end,
+            gj.simulate(system, 0.8, x0=x_contact, settings=settings).x_end,
+            gj.simulate(system, 0.8, x0=x_contact, v0=v_contact, settings=settings).x_end]
+    assert len(traces) == 1
+    np.testing.assert_array_equal(ends[0], ends[1])
+    np.testing.assert_array_equal(ends[0], ends[2])
