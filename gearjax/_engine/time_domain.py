@@ -490,8 +490,7 @@ def simulate(system: System, omega, *, x0=None, v0=None,
     **Raises:** ``ValueError`` for a quasi-periodic ``system`` (:func:`require_periodic`).
     """
     require_periodic(system, "simulate")
-    # both start arrays always given: one compiled program whatever the caller passes
-    if x0 is None:
+    if x0 is None:  # both start arrays given: one program whatever the caller passes
         x0, zero = contact_state_jit(system)
         v0 = zero if v0 is None else v0
     elif v0 is None:

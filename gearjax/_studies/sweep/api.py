@@ -15,6 +15,7 @@ from ..._gear.train import Train
 from .. import concurrency
 from .. import harmonics as _harmonics
 from . import completion as _completion
+from . import seeds as _seeds
 from . import segments as _segments
 from . import speculation as _speculation
 from . import walk as _walk
@@ -167,7 +168,7 @@ def sweep(
                                 "added": walk.added}
     if complete:
         solver["completion"] = {"seeds": int(seeds), "jump_multiplier":
-                                _completion.JUMP_MULTIPLIER, "max_branches":
+                                _seeds.JUMP_MULTIPLIER, "max_branches":
                                 _completion.MAX_BRANCHES}
     data = point_data(walk, log, post, ctx, F_static, linear=linear, pieces=pieces)
     folds = list(walk.folds) + [p["fold_lam"] * ctx.from_hz for piece in (pieces or [])

@@ -339,7 +339,7 @@ def doubling_points(periods: Periods, pieces, records: list) -> list[Doubling]:
 def start(periods: Periods, atlas, records: list, d: Doubling) -> dict | None:
     """The seed of the branch born at the doubling ``d`` (:func:`switch`), as the fields
     ``K``, ``y``, ``lam``, ``f_hz``, ``eta`` and ``record`` of a
-    :class:`~gearjax._studies.sweep.completion.Seed`; ``None`` where a doubled branch
+    :class:`~gearjax._studies.sweep.seeds.Seed`; ``None`` where a doubled branch
     traced before came back there (``atlas.returned``; that branch's record's
     ``doublings_hz`` then lists ``d``) or the switch finds none (the record of ``d``'s
     branch lists it under ``not_doubled``, with why)."""
