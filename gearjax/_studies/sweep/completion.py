@@ -10,8 +10,10 @@ converged periodic solutions off the branches it traced, in this order:
   fold, or a stability change), the orbit a rig sweeping on in that direction settles
   to: a time integration (:func:`~gearjax._studies.sweep.starts.settled_start`) from the
   last stable state, at the first frequency beyond where the branch there is clearly
-  unstable (largest multiplier at least :data:`~gearjax._studies.sweep.seeds.JUMP_MULTIPLIER`, or past its fold), then
-  Newton;
+  unstable (largest multiplier at least
+  :data:`~gearjax._studies.sweep.seeds.JUMP_MULTIPLIER`, or past its fold), then Newton
+  (:mod:`~gearjax._studies.sweep.seeds`: these jumps and the far end found side by
+  side);
 - ``period doubling``: wherever a Floquet multiplier of a traced branch passes through
   -1, the branch of twice the period born there (``eta`` doubled: K doubled too), entered
   along the critical Floquet mode (:mod:`~gearjax._studies.sweep.doubling`); the branches
@@ -244,7 +246,8 @@ def complete(ctx, walk, log, post, F_static, *, seeds: int = 0, progress=None):
         pieces += new
         records.append({"branch": number, "found": seed.found, "seed_hz": float(seed.f_hz),
                         "stops": stops, "eta": int(seed.eta), **seed.record})
-        queue += _seeds.jump_seeds(ctx, plan, new) + _doubling.doubling_points(periods, new, records)
+        queue += (_seeds.jump_seeds(ctx, plan, new)
+                  + _doubling.doubling_points(periods, new, records))
     return pieces, records
 
 

@@ -25,7 +25,6 @@ JUMP_MULTIPLIER = 1.2
 multiplier of at least this modulus (a start there leaves the unstable orbit within the
 integrated periods: ``1.2 ** 40`` is about 1500)."""
 
-
 SEED_TIME = _time_domain.TimeDomain(rtol=_starts.SETTLE_RTOL, atol=_starts.SETTLE_RTOL,
                                     periodic_tol=100 * _starts.SETTLE_RTOL,
                                     max_periods=_starts.SETTLE_PERIODS, n_samples=64)
@@ -35,11 +34,11 @@ SEED_TIME = _time_domain.TimeDomain(rtol=_starts.SETTLE_RTOL, atol=_starts.SETTL
 @dataclasses.dataclass
 class Seed:
     """A converged periodic solution ``y`` (scaled, ``K`` harmonics) at ``lam``, and how
-    it was ``found`` (module docstring) at ``f_hz``; ``back_only``: the first point of a
-    walked branch (a restart), traced only back towards the band's start, without the
-    check that its orbit is new; ``eta``: the period in base periods (``K`` harmonics of
-    ``Omega / eta``); ``record``: fields the branch's record adds (a doubled branch's
-    origin)."""
+    it was ``found`` (:mod:`~gearjax._studies.sweep.completion`) at ``f_hz``;
+    ``back_only``: the first point of a walked branch (a restart), traced only back
+    towards the band's start, without the check that its orbit is new; ``eta``: the
+    period in base periods (``K`` harmonics of ``Omega / eta``); ``record``: fields the
+    branch's record adds (a doubled branch's origin)."""
 
     K: int
     y: np.ndarray
@@ -100,8 +99,8 @@ def seeds_in_threads(jobs) -> list:
 
 def jump_seeds(ctx, plan, pieces) -> list[Seed]:
     """Where each stable stretch of the branches of ``pieces`` ends, the orbit a rig
-    sweeping on settles to (module docstring), in frequency order along each branch
-    (:func:`jump_jobs`, found side by side)."""
+    sweeping on settles to (:mod:`~gearjax._studies.sweep.completion`), in frequency order
+    along each branch (:func:`jump_jobs`, found side by side)."""
     return [s for s in seeds_in_threads(jump_jobs(ctx, plan, pieces)) if s is not None]
 
 
