@@ -462,8 +462,10 @@ def _steady_state(problem: IntegrationProblem, omega, x0, v0, settings: TimeDoma
 
 
 def start_state(system: System, x0, v0):
+    """``(x0, v0)`` as float arrays: the contact state (:func:`contact_state`, one
+    compiled program) where ``x0`` is None, zero rates where ``v0`` is None."""
     if x0 is None:
-        x0, zero = contact_state(system)
+        x0, zero = contact_state_jit(system)
         return x0, zero if v0 is None else jnp.asarray(v0, dtype=float)
     x0 = jnp.asarray(x0, dtype=float)
     return x0, jnp.zeros_like(x0) if v0 is None else jnp.asarray(v0, dtype=float)
@@ -490,12 +492,8 @@ def simulate(system: System, omega, *, x0=None, v0=None,
     **Raises:** ``ValueError`` for a quasi-periodic ``system`` (:func:`require_periodic`).
     """
     require_periodic(system, "simulate")
-    if x0 is None:  # both start arrays given: one program whatever the caller passes
-        x0, zero = contact_state_jit(system)
-        v0 = zero if v0 is None else v0
-    elif v0 is None:
-        v0 = np.zeros(np.shape(x0))
-    return _simulate(system, *_arrays(omega, x0, v0), settings)
+    # both start arrays given: one compiled program whatever the caller passes
+    return _simulate(system, *_arrays(omega, *start_state(system, x0, v0)), settings)
 
 
 def _arrays(*values):
@@ -505,7 +503,6 @@ def _arrays(*values):
 
 @eqx.filter_jit
 def _simulate(system, omega, x0, v0, settings):
-    x0, v0 = start_state(system, x0, v0)
     return _steady_state(integration_problem(system), omega, x0, v0, settings)
 
 
