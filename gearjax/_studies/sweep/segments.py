@@ -10,10 +10,9 @@ import warnings
 import jax.numpy as jnp
 import numpy as np
 
-from ..._engine import aft as _aft
 from ..._engine import hb as _hb
 from .. import harmonics as _harmonics
-from .starts import newton
+from .starts import newton, resize_harmonics
 
 
 def band_segments(from_hz, to_hz, mu_ref, min_k, eta, fixed, cutoff_hz, system=None):
@@ -134,9 +133,8 @@ def checked_point(ctx, K, f_hz, previous=None):
     if previous is not None and bool(previous[1].converged):
         small, sol_small, backlash = previous
         problem = ctx.problem(K, backlash)
-        y0 = _aft.resize(small.basis, problem.basis,
-                         np.asarray(sol_small.y).reshape(small.shape)).reshape(-1)
-        sol = newton(problem, jnp.asarray(omega), jnp.asarray(y0))
+        y0 = resize_harmonics(sol_small.y, small.settings.n_harmonics, problem)
+        sol = newton(problem, jnp.asarray(omega), y0)
         if bool(sol.converged):
             return problem, sol, backlash
         problem = ctx.problem(K)
