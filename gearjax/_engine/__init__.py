@@ -63,8 +63,8 @@ from .system import system_from_matrices as system_from_matrices
 from .time_domain import TimeDomain as TimeDomain
 from .time_domain import compile_simulate_points as compile_simulate_points
 from .time_domain import Trajectory as Trajectory
-from .time_domain import contact_state as contact_state
-from .time_domain import hb_initial_state as hb_initial_state
+from .initial_state import contact_state as contact_state
+from .initial_state import hb_initial_state as hb_initial_state
 from .time_domain import simulate as simulate
 from .time_domain import simulate_points as simulate_points
 from .time_domain import simulate_sweep as simulate_sweep

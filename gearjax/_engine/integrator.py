@@ -1,12 +1,23 @@
 """The settings every time integration shares: the ODE solver and its step-size
 controller (:class:`Integrator`), extended by the periodic integration's
 (:class:`~gearjax._engine.time_domain.TimeDomain`) and the windowed one's
-(:class:`~gearjax._engine.windowed.Windowed`)."""
+(:class:`~gearjax._engine.windowed.Windowed`); and the two integrations built on them:
+to an end time (:func:`integrate`) and through sample times (:func:`sample`).
+
+Neither asks diffrax to save at given times (``SaveAt(ts=...)``): diffrax checks such
+times with ``equinox.error_if``, a host callback in the compiled program, and JAX keeps
+no program with a host callback in its persistent compilation cache, so every process
+would compile the integration again. :func:`sample` integrates from one sample time to
+the next instead, each interval one ``diffeqsolve`` that saves its end state (and picks
+its first step itself, as diffrax does for a ``dt0`` of None).
+"""
 
 from __future__ import annotations
 
 import diffrax as dfx
 import equinox as eqx
+import jax
+import jax.numpy as jnp
 
 
 class Integrator(eqx.Module):
@@ -38,3 +49,55 @@ class Integrator(eqx.Module):
             if not float(getattr(self, field)) > 0:
                 raise ValueError(f"{name}.{field} must be positive, not "
                                  f"{getattr(self, field)!r}.")
+
+
+class Leg(eqx.Module):
+    """The end of an integration: the state ``z`` at the end time, whether the solver
+    got there (``ok``, a boolean array), why not (``result``, a ``diffrax.RESULTS``
+    item), and its accepted and rejected ``steps``, ``rejected``."""
+
+    z: jax.Array
+    ok: jax.Array
+    result: dfx.RESULTS
+    steps: jax.Array
+    rejected: jax.Array
+
+
+def integrate(settings: Integrator, term, t0, t1, z0, args, max_steps: int) -> Leg:
+    """Integrate ``term`` from ``(t0, z0)`` to ``t1`` with ``settings``' solver and PI
+    controller, at most ``max_steps`` steps, its first step chosen by the controller
+    (jittable; no host callback in the program, module docstring). **Returns:** a
+    :class:`Leg` (``z`` the last state reached where the solver stopped early)."""
+    controller = dfx.PIDController(rtol=settings.rtol, atol=settings.atol,
+                                   pcoeff=settings.pcoeff, icoeff=settings.icoeff)
+    sol = dfx.diffeqsolve(term, settings.solver, t0, t1, None, z0, args=args,
+                          saveat=dfx.SaveAt(t1=True), stepsize_controller=controller,
+                          max_steps=max_steps, adjoint=dfx.ForwardMode(), throw=False)
+    return Leg(z=sol.ys[-1], ok=sol.result == dfx.RESULTS.successful, result=sol.result,
+               steps=sol.stats["num_accepted_steps"], rejected=sol.stats["num_rejected_steps"])
+
+
+def sample(settings: Integrator, term, t0, z0, ts, args, max_steps: int):
+    """The states at the times ``ts`` ``(S,)`` (increasing, ``ts[0] >= t0``) of the
+    integration of ``term`` from ``(t0, z0)``: one :func:`integrate` from each time to
+    the next, at most ``max_steps`` steps each (jittable).
+
+    **Returns:** ``(zs, leg)``: ``zs`` ``(S, d)`` and the :class:`Leg` of the whole
+    (``z`` the state at ``ts[-1]``, ``ok`` and ``result`` of the first interval that
+    failed, steps summed). Past a failed interval the states stay at the last one
+    reached.
+    """
+    def one(c, t1):
+        t, z, ok, result, steps, rejected = c
+        leg = integrate(settings, term, t, t1, z, args, max_steps)
+        good = ok & leg.ok
+        z1 = jnp.where(good, leg.z, z)
+        carry = (t1, z1, good, dfx.RESULTS.where(ok, leg.result, result),
+                 steps + jnp.where(ok, leg.steps, 0), rejected + jnp.where(ok, leg.rejected, 0))
+        return carry, z1
+
+    t0 = jnp.asarray(t0, dtype=z0.dtype)
+    init = (t0, z0, jnp.asarray(True), dfx.RESULTS.successful, jnp.asarray(0),
+            jnp.asarray(0))
+    (_, z, ok, result, steps, rejected), zs = jax.lax.scan(one, init, ts)
+    return zs, Leg(z=z, ok=ok, result=result, steps=steps, rejected=rejected)

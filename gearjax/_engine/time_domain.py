@@ -23,9 +23,9 @@ Solver: the paper's braked members sit on 1e10 N m/rad housing springs, a
 ~0.4 MHz mode with damping ratio ~4e-4, against mesh frequencies of a few kHz, and
 the response also holds the 39-45 kHz shaft modes (damping ratio ~0.005, excited
 through the parametric mesh stiffness) that ``rtol = 1e-8`` must resolve. The
-default is the explicit 8th-order ``diffrax.Dopri8`` (7th-order dense output for
-the samples) with an I step-size controller: it is 7-11 times faster than the L-stable
-``diffrax.Kvaerno5`` on the stiff brake springs at this tolerance, with the same forces
+default is the explicit 8th-order ``diffrax.Dopri8`` with an I step-size controller: it
+is 7-11 times faster than the L-stable ``diffrax.Kvaerno5`` on the stiff brake springs
+at this tolerance, with the same forces
 (docs/time_domain.md has the measurements). Both are available
 (``TimeDomain(solver=diffrax.Kvaerno5(), pcoeff=0.3, icoeff=0.3)``) and tested against
 each other.
@@ -41,14 +41,16 @@ dozens of switches per period). Convergence is checked by halving the tolerances
 Steady state: integrate one base period ``2 pi / Omega`` at a time and compare
 the Poincare points (mesh deflections ``W x`` and rates ``W x'``, not the full
 state: the undamped near-rigid-body mode never settles but carries no mesh force)
-with those 1..8 periods earlier. Only a periodic excitation has such a period: the
-steady-state search refuses a quasi-periodic ``System`` (``ValueError``,
+with those 1..8 periods earlier. The samples of the last ``sample_periods`` periods come
+from integrating those periods again from the state they started in, from one sample
+time to the next (:func:`gearjax._engine.integrator.sample`: a program without a host
+callback, so JAX's persistent cache keeps it). Only a periodic excitation has such a
+period: the steady-state search refuses a quasi-periodic ``System`` (``ValueError``,
 :func:`require_periodic`), whose time integration is windowed (``windowed.py``).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import diffrax as dfx
@@ -59,7 +61,13 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from .._config import require_x64
-from . import aft as _aft
+from . import integrator as _integrator
+from .initial_state import (  # where an integration starts; importable from here too
+    contact_state as contact_state,
+    contact_state_jit as contact_state_jit,
+    hb_initial_state as hb_initial_state,
+    start_state as start_state,
+)
 from .integrator import Integrator
 from .mesh_force import mesh_force, stiffness_series, transmission_error
 from .results import RESULTS
@@ -278,48 +286,6 @@ def mesh_samples(problem: IntegrationProblem, omega, tau, z):
     return x, v, p, p_dot, F
 
 
-# -------------------------------------------------------------------- initial states
-
-
-def contact_state(system: System):
-    """The static solution shifted into contact on each mesh's loaded flank.
-
-    Solves the mean-stiffness statics with ``g(p) = p - b sign(F_static)`` (as
-    ``_hb.linear_guess``): every mesh deflects by its static deflection plus its
-    backlash, never starting inside the gap. **Returns:** ``(x0, v0)``, ``(n,)``
-    each (rad or m, and zero rates).
-    """
-    _, F_static = static_deflection(system)
-    preload = system.W.T @ (system.kbar * system.backlash * jnp.sign(F_static))
-    x0, _ = static_deflection(dataclasses.replace(system, f_mean=system.f_mean + preload))
-    return x0, jnp.zeros_like(x0)
-
-
-contact_state_jit = eqx.filter_jit(contact_state)
-""":func:`contact_state`, compiled (one program instead of its operations one by one)."""
-
-
-def hb_initial_state(X: Float[Array, "C n"], omega, eta: int = 1, basis=None):
-    """State at ``t = 0`` of a harmonic-balance solution.
-
-    **Arguments:** ``X`` ``(2K+1, n)``: coefficients of ``x(tau)``, ``tau = (Omega /
-    eta) t`` (``HBSolution.X``); ``omega``: base frequency Omega (rad/s); ``eta``: the
-    sub-harmonic index of the solution; ``basis``: the
-    :class:`~gearjax._engine.aft.Basis` of a torus solution ``(2P+1, n)`` (``None``: the
-    periodic harmonics ``1..K``), whose wave vector ``k`` turns at ``k . rates`` times
-    ``Omega / eta``. **Returns:** ``(x0, v0)``, ``(n,)`` each (rad or m, and rad/s or
-    m/s).
-    """
-    X = jnp.asarray(X)
-    if basis is None:
-        k = jnp.arange(1, (X.shape[0] - 1) // 2 + 1)[:, None]
-    else:
-        k = jnp.asarray(_aft.frequency_numbers(basis)[2::2])[:, None]
-    x0 = X[0] + jnp.sum(X[1::2], axis=0)
-    v0 = (omega / eta) * jnp.sum(k * X[2::2], axis=0)
-    return x0, v0
-
-
 def sample_trajectory(system: System, omega, x0, v0, tau, settings: TimeDomain = TimeDomain()):
     """The motion from ``(x0, v0)`` at ``t = 0`` sampled at the base phases ``tau``
     ``(S,)`` (rad, ``tau = Omega t``, increasing, ``tau[0] > 0``; NumPy: the span is a
@@ -338,17 +304,11 @@ def _sample_trajectory(system, omega, x0, v0, tau, settings, periods):
     problem = integration_problem(system)
     n = system.n_dof
     z0 = jnp.concatenate([x0 / problem.x_scale, v0 / (omega * problem.x_scale)])
-    controller = dfx.PIDController(rtol=settings.rtol, atol=settings.atol,
-                                   pcoeff=settings.pcoeff, icoeff=settings.icoeff)
-    sol = dfx.diffeqsolve(dfx.ODETerm(vector_field), settings.solver, 0.0, tau[-1], None, z0,
-                          args=(problem, omega), saveat=dfx.SaveAt(ts=tau),
-                          stepsize_controller=controller,
-                          max_steps=settings.max_steps * periods, adjoint=dfx.ForwardMode(),
-                          throw=False)
-    z = sol.ys
+    z, leg = _integrator.sample(settings, dfx.ODETerm(vector_field), 0.0, z0, tau,
+                                (problem, omega), settings.max_steps * periods)
     x = problem.x_scale * z[:, :n]
     v = omega * problem.x_scale * z[:, n:]
-    return x, v, sol.result == dfx.RESULTS.successful
+    return x, v, leg.ok
 
 
 # ---------------------------------------------------------------------- steady state
@@ -368,34 +328,26 @@ def _steady_state(problem: IntegrationProblem, omega, x0, v0, settings: TimeDoma
     require_x64()
     s = problem.system
     n, N, P, Q = s.n_dof, settings.n_samples, settings.sample_periods, settings.max_subharmonic
-    omega = eqx.error_if(jnp.asarray(omega, dtype=float), ~(omega > 0),
-                         "simulate: the base frequency omega must be positive (rad/s)")
+    # a non-positive frequency (only where it is traced: the public functions refuse a
+    # concrete one, ``_positive``) integrates nothing and is ``nonfinite``
+    positive = jnp.asarray(omega, dtype=float) > 0
+    omega = jnp.where(positive, omega, 1.0)
     z0 = jnp.concatenate([x0 / problem.x_scale, v0 / (omega * problem.x_scale)])
     term = dfx.ODETerm(vector_field)
-    controller = dfx.PIDController(rtol=settings.rtol, atol=settings.atol,
-                                   pcoeff=settings.pcoeff, icoeff=settings.icoeff)
-    # the last sample exactly at the period's end (2 pi j / N rounds above 2 pi for some N)
-    frac = jnp.minimum(2 * jnp.pi * jnp.arange(N + 1) / N, 2 * jnp.pi)
+    args = (problem, omega)
     q = jnp.arange(1, Q + 1)
-
-    def one_period(k, z):
-        # every excitation is 2 pi periodic in tau: each period runs over [0, 2 pi]
-        sol = dfx.diffeqsolve(term, settings.solver, 0.0, 2 * jnp.pi, None, z,
-                              args=(problem, omega), saveat=dfx.SaveAt(ts=frac),
-                              stepsize_controller=controller, max_steps=settings.max_steps,
-                              adjoint=dfx.ForwardMode(), throw=False)
-        return sol
 
     def cond(state):
         return ~state["done"]
 
     def body(state):
         k, z = state["k"], state["z"]
-        sol = one_period(k, z)
-        ok = sol.result == dfx.RESULTS.successful
-        z_new = sol.ys[N]
-        finite = jnp.all(jnp.isfinite(sol.ys))
-        good = ok & finite
+        # every excitation is 2 pi periodic in tau: each period runs over [0, 2 pi]
+        leg = _integrator.integrate(settings, term, 0.0, 2 * jnp.pi, z, args,
+                                    settings.max_steps)
+        z_new = leg.z
+        finite = jnp.all(jnp.isfinite(z_new))
+        good = leg.ok & finite
         point = _poincare(problem, z_new)
         d = jnp.max(jnp.abs(point[None, :] - state["buffer"]), axis=1)  # (Q,)
         d = jnp.where(q <= k + 1, d, jnp.inf)
@@ -406,69 +358,76 @@ def _steady_state(problem: IntegrationProblem, omega, x0, v0, settings: TimeDoma
         found = (streak >= q) & ((q == 1) | apart)
         period = jnp.where(jnp.any(found), jnp.argmax(found) + 1, 0)
         k_new = k + 1
-        code = RESULTS.where(
-            ~ok, RESULTS.where(sol.result == dfx.RESULTS.max_steps_reached,
-                               RESULTS.max_steps_reached, RESULTS.solver_failed),
-            RESULTS.where(~finite, RESULTS.nonfinite,
-                          RESULTS.where(period == 1, RESULTS.successful,
-                                        RESULTS.not_periodic)))
+        code = _failure(leg, finite, RESULTS.where(period == 1, RESULTS.successful,
+                                                   RESULTS.not_periodic))
         done = ~good | (((period > 0) & (k_new >= P)) | (k_new >= max(settings.max_periods, P)))
-        samples = jnp.concatenate([state["samples"][N:], sol.ys[:N]], axis=0)
         last = jnp.where((d < settings.periodic_tol) & apart, q, Q + 1)
         return dict(
             k=jnp.where(good, k_new, k),
             z=jnp.where(good, z_new, z),
             buffer=jnp.where(good, jnp.concatenate([point[None], state["buffer"][:-1]]),
                              state["buffer"]),
+            starts=jnp.where(good, jnp.concatenate([state["starts"][1:], z[None]]),
+                             state["starts"]),
             streak=streak,
-            samples=jnp.where(good, samples, state["samples"]),
             done=done,
             code=code,
             period=jnp.where(period > 0, period,
                              jnp.where(jnp.min(last) <= Q, jnp.min(last), 0)),
             distance=d,
-            steps=state["steps"] + sol.stats["num_accepted_steps"],
-            rejected=state["rejected"] + sol.stats["num_rejected_steps"],
+            steps=state["steps"] + leg.steps,
+            rejected=state["rejected"] + leg.rejected,
         )
 
     init = dict(
         k=jnp.asarray(0),
         z=z0,
         buffer=jnp.broadcast_to(_poincare(problem, z0), (Q,) + _poincare(problem, z0).shape),
+        starts=jnp.broadcast_to(z0, (P,) + z0.shape),
         streak=jnp.zeros(Q, dtype=int),
-        samples=jnp.zeros((P * N, 2 * n)),
-        done=jnp.asarray(False),
-        code=RESULTS.not_periodic,
+        done=~positive,
+        code=RESULTS.where(positive, RESULTS.not_periodic, RESULTS.nonfinite),
         period=jnp.asarray(0),
         distance=jnp.full(Q, jnp.inf),
         steps=jnp.asarray(0),
         rejected=jnp.asarray(0),
     )
-    # at least ``sample_periods`` periods, so that every sample is filled
+    # at least ``sample_periods`` periods, so that ``starts`` holds the start of each
     state = jax.lax.while_loop(cond, body, init)
+    # the last P periods again, from the start of the first, through the sample times
+    # (module docstring of ``integrator``: no saving at given times inside the loop)
+    start = state["starts"][0]
+    rest, leg = _integrator.sample(settings, term, 0.0, start,
+                                   2 * jnp.pi * jnp.arange(1, P * N) / N, args,
+                                   settings.max_steps)
+    samples = jnp.concatenate([start[None], rest])
+    integrated = (state["code"] == RESULTS.successful) | (state["code"] == RESULTS.not_periodic)
+    code = RESULTS.where(integrated, _failure(leg, jnp.all(jnp.isfinite(samples)), state["code"]),
+                         state["code"])
     k = state["k"]
     tau = 2 * jnp.pi * (k - P) + 2 * jnp.pi * jnp.arange(P * N) / N
-    x, v, p, p_dot, F = mesh_samples(problem, omega, tau, state["samples"].T)
+    x, v, p, p_dot, F = mesh_samples(problem, omega, tau, samples.T)
     z_end = state["z"]
     return Trajectory(omega=omega, t=tau / omega, x=x, v=v, p=p, p_dot=p_dot, F=F,
                       x_end=problem.x_scale * z_end[:n],
                       v_end=omega * problem.x_scale * z_end[n:],
-                      result=state["code"], periods=k, period=state["period"],
+                      result=code, periods=k, period=state["period"],
                       distance=state["distance"],
-                      stats={"num_steps": state["steps"], "num_rejected": state["rejected"]})
+                      stats={"num_steps": state["steps"] + leg.steps,
+                             "num_rejected": state["rejected"] + leg.rejected})
+
+
+def _failure(leg: _integrator.Leg, finite, otherwise) -> RESULTS:
+    """The result of an integration ``leg``: the solver's failure (``max_steps_reached``
+    or ``solver_failed``), else ``nonfinite`` where the state is not ``finite``, else
+    ``otherwise``."""
+    return RESULTS.where(
+        ~leg.ok, RESULTS.where(leg.result == dfx.RESULTS.max_steps_reached,
+                               RESULTS.max_steps_reached, RESULTS.solver_failed),
+        RESULTS.where(~finite, RESULTS.nonfinite, otherwise))
 
 
 # ------------------------------------------------------------------------ public API
-
-
-def start_state(system: System, x0, v0):
-    """``(x0, v0)`` as float arrays: the contact state (:func:`contact_state`, one
-    compiled program) where ``x0`` is None, zero rates where ``v0`` is None."""
-    if x0 is None:
-        x0, zero = contact_state_jit(system)
-        return x0, zero if v0 is None else jnp.asarray(v0, dtype=float)
-    x0 = jnp.asarray(x0, dtype=float)
-    return x0, jnp.zeros_like(x0) if v0 is None else jnp.asarray(v0, dtype=float)
 
 
 def simulate(system: System, omega, *, x0=None, v0=None,
@@ -489,11 +448,25 @@ def simulate(system: System, omega, *, x0=None, v0=None,
     (rad/s, scalar); ``x0``, ``v0``: ``(n,)`` initial coordinates (rad or m) and
     rates (per s); ``settings``: :class:`TimeDomain`. **Returns:** a :class:`Trajectory`.
 
-    **Raises:** ``ValueError`` for a quasi-periodic ``system`` (:func:`require_periodic`).
+    **Raises:** ``ValueError`` for a quasi-periodic ``system`` (:func:`require_periodic`)
+    or an ``omega`` that is not positive (where it is traced, under a caller's ``jit``:
+    the result ``nonfinite`` instead).
     """
     require_periodic(system, "simulate")
+    _positive(omega, "simulate")
     # both start arrays given: one compiled program whatever the caller passes
     return _simulate(system, *_arrays(omega, *start_state(system, x0, v0)), settings)
+
+
+def _positive(omega, caller: str) -> None:
+    """Refuse a concrete base frequency that is not positive (``ValueError``); a traced
+    one integrates nothing and gives ``nonfinite`` (``_steady_state``)."""
+    if isinstance(omega, jax.core.Tracer):
+        return
+    w = np.asarray(omega, dtype=float)
+    if not np.all(w > 0):
+        raise ValueError(f"{caller}: the base frequency omega must be positive (rad/s), not "
+                         f"{float(w.reshape(-1)[~(w.reshape(-1) > 0)][0])!r}")
 
 
 def _arrays(*values):
@@ -519,9 +492,10 @@ def simulate_points(system: System, omegas, *, x0=None, v0=None,
     as many steps and periods as the slowest), which on a CPU usually costs more than it
     saves (docs/time_domain.md). **Returns:** a :class:`Trajectory` with a leading axis ``B``
     on every field. **Raises:** ``ValueError`` for a quasi-periodic ``system``
-    (:func:`require_periodic`).
+    (:func:`require_periodic`) or a frequency that is not positive (as :func:`simulate`).
     """
     require_periodic(system, "simulate_points")
+    _positive(omegas, "simulate_points")
     return _simulate_points(system, *_arrays(omegas, x0, v0), settings, batch_size)
 
 
@@ -569,9 +543,11 @@ def simulate_sweep(system: System, omegas, *, x0=None, v0=None,
     ``(..., n)`` with all the leading axes of ``omegas``; None for the static contact
     state.
     **Returns:** a :class:`Trajectory` with leading axes ``(..., N)``. **Raises:**
-    ``ValueError`` for a quasi-periodic ``system`` (:func:`require_periodic`).
+    ``ValueError`` for a quasi-periodic ``system`` (:func:`require_periodic`) or a
+    frequency that is not positive (as :func:`simulate`).
     """
     require_periodic(system, "simulate_sweep")
+    _positive(omegas, "simulate_sweep")
     return _simulate_sweep(system, *_arrays(omegas, x0, v0), settings)
 
 

@@ -197,8 +197,14 @@ def test_settings_and_frequency_are_validated():
         gj.TimeDomain(n_samples=0)
     with pytest.raises(ValueError, match="TimeDomain.rtol must be positive"):
         gj.TimeDomain(rtol=0.0)
-    with pytest.raises(RuntimeError, match="omega must be positive"):
+    with pytest.raises(ValueError, match="simulate: the base frequency omega must be positive"):
         gj.simulate(oscillator(), 0.0, settings=gj.TimeDomain(max_steps=5, n_samples=32))
+    with pytest.raises(ValueError, match="simulate_points: .* not -1.0"):
+        gj.simulate_points(oscillator(), np.array([1.0, -1.0]), settings=gj.TimeDomain())
+    # traced (under the caller's jit), a frequency that is not positive is a result
+    run = jax.jit(lambda w: gj.simulate(oscillator(), w, settings=gj.TimeDomain(n_samples=32)))
+    tr = run(-1.0)
+    assert bool(tr.result == RESULTS.nonfinite) and int(tr.periods) == 0
 
 
 def test_paper_first_gear_agrees_with_harmonic_balance():
@@ -234,8 +240,7 @@ def test_paper_first_gear_agrees_with_harmonic_balance():
 
 def test_simulate_compiles_one_program_whatever_start_it_is_given(monkeypatch):
     """The contact state, a given position, and a given position and rate: one trace of
-    the integration (a second program per kind of start would be compiled again in every
-    process: integration programs are never kept in the persistent cache)."""
+    the integration (one program to compile, or to load from the persistent cache)."""
     traces = []
     original = td._steady_state
     monkeypatch.setattr(td, "_steady_state", lambda *a: traces.append(1) or original(*a))
@@ -248,3 +253,21 @@ def test_simulate_compiles_one_program_whatever_start_it_is_given(monkeypatch):
     assert len(traces) == 1
     np.testing.assert_array_equal(ends[0], ends[1])
     np.testing.assert_array_equal(ends[0], ends[2])
+
+
+def test_integration_programs_hold_no_host_callback():
+    """The steady-state and sampled integrations compile to programs without a host
+    callback (diffrax checks ``SaveAt(ts=...)`` with one, and JAX keeps no program that
+    holds one in its persistent cache: it would be compiled again in every process)."""
+    system = oscillator(clearance=0.3)
+    x0, v0 = td.start_state(system, None, None)
+    omega = jnp.asarray(0.8)
+    settings = gj.TimeDomain(max_periods=3, n_samples=16)
+    tau = jnp.asarray(np.linspace(0.5, 20.0, 40))
+    programs = {"simulate": td._simulate.lower(system, omega, x0, v0, settings),
+                "simulate_points": td._simulate_points.lower(
+                    system, jnp.asarray([0.8, 0.9]), x0, v0, settings, None),
+                "sample_trajectory": td._sample_trajectory.lower(system, omega, x0, v0, tau,
+                                                                 settings, 4)}
+    for name, lowered in programs.items():
+        assert "callback" not in lowered.as_text(), name
