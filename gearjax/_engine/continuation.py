@@ -30,7 +30,6 @@ from jaxtyping import Array
 from . import bordered as _bordered
 from . import corrector as _corrector
 from . import hb as _hb
-from .exported import persistent_jit
 from .results import RESULTS
 
 
@@ -469,6 +468,5 @@ class Trace:
         return bool(np.any(near))
 
 
-# compiled, and kept between processes (exported.py)
-_arclength_step_jit = persistent_jit(arclength_step, static_argnums=(2,))
-_start_jit = persistent_jit(start, static_argnums=(4,))
+_arclength_step_jit = jax.jit(arclength_step, static_argnums=(2,))
+_start_jit = jax.jit(start, static_argnums=(4,))

@@ -29,7 +29,6 @@ import optimistix as optx
 from jaxtyping import Array
 
 from . import hb as _hb
-from .exported import persistent_jit
 from .linear_solver import CondensedLU, HBJacobian
 from .results import RESULTS
 
@@ -151,12 +150,11 @@ def newton(problem: _hb.HBProblem, omega, y0: Array) -> _hb.HBSolution:
     return _iterate(problem, jnp.asarray(omega, dtype=float), y0, chord=False)
 
 
-_newton_compiled = persistent_jit(newton)
+_newton_compiled = jax.jit(newton)
 
 
 def newton_jit(problem: _hb.HBProblem, omega, y0: Array) -> _hb.HBSolution:
-    """:func:`newton`, compiled (one cache of programs for every caller, kept between
-    processes: :func:`~gearjax._engine.exported.persistent_jit`): ``omega`` and
+    """:func:`newton`, compiled (one cache of programs for every caller): ``omega`` and
     ``y0`` are passed on as float64 arrays of fixed (strong) type, so that a Python
     float and a NumPy float do not compile two programs."""
     return _newton_compiled(problem, jnp.asarray(omega, dtype=jnp.float64),

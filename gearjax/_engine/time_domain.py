@@ -51,7 +51,6 @@ period: the steady-state search refuses a quasi-periodic ``System`` (``ValueErro
 
 from __future__ import annotations
 
-import functools
 import math
 
 import diffrax as dfx
@@ -63,7 +62,6 @@ from jaxtyping import Array, Float, Int
 
 from .._config import require_x64
 from . import integrator as _integrator
-from .exported import persistent_jit
 from .initial_state import (  # where an integration starts; importable from here too
     contact_state as contact_state,
     contact_state_jit as contact_state_jit,
@@ -476,7 +474,7 @@ def _arrays(*values):
     return tuple(None if v is None else jnp.asarray(v, dtype=float) for v in values)
 
 
-@functools.partial(persistent_jit, filter=True)  # kept between processes (exported.py)
+@eqx.filter_jit
 def _simulate(system, omega, x0, v0, settings):
     return _steady_state(integration_problem(system), omega, x0, v0, settings)
 

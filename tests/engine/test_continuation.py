@@ -81,10 +81,10 @@ def test_coexisting_branches_match_time_integration(branch):
 def test_python_driver_matches_and_compiles_once(branch):
     problem, settings = branch["problem"], branch["settings"]
     b1 = C.continue_branch(branch["param"], branch["y0"], 0.5, 0.6, settings, max_points=50)
-    n_before = C._arclength_step_jit.cache_size()
+    n_before = C._arclength_step_jit._cache_size()
     b2 = C.continue_branch(branch["param"], _newton.solve_hb(problem, 0.55).y, 0.55, 0.62, settings,
                            max_points=50)
-    assert C._arclength_step_jit.cache_size() == n_before  # same shapes: no recompilation
+    assert C._arclength_step_jit._cache_size() == n_before  # same shapes: no recompilation
     assert bool(b1.result == RESULTS.reached_end) and bool(b2.result == RESULTS.reached_end)
     # on the contact branch the response is linear: first harmonic 0.03 / (1 - w^2 + 0.1 i w)
     w = b1.omega[-1]

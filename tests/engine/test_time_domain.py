@@ -241,7 +241,6 @@ def test_paper_first_gear_agrees_with_harmonic_balance():
 def test_simulate_compiles_one_program_whatever_start_it_is_given(monkeypatch):
     """The contact state, a given position, and a given position and rate: one trace of
     the integration (one program to compile, or to load from the persistent cache)."""
-    monkeypatch.setenv("GEARJAX_CACHE_DIR", "0")  # no kept program: every process traces
     traces = []
     original = td._steady_state
     monkeypatch.setattr(td, "_steady_state", lambda *a: traces.append(1) or original(*a))

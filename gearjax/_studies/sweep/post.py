@@ -12,7 +12,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._engine.exported import persistent_jit
 from ..._engine.responses import mesh_responses
 from ..._engine.results import RESULTS, result_word
 from ..._engine.verdict import (
@@ -181,7 +180,7 @@ def bifurcations(f_hz, stable, multipliers, excluded, branch=None, torus: bool =
     return out
 
 
-@persistent_jit
+@jax.jit
 def batch_monodromy(problem, basis, Xs, omegas, F_static):
     """Mesh responses and scaled monodromy matrices of a chunk of solutions."""
     resp = jax.vmap(mesh_responses, in_axes=(None, 0, 0, None))(problem, Xs, omegas, F_static)
@@ -190,7 +189,7 @@ def batch_monodromy(problem, basis, Xs, omegas, F_static):
     return resp, Phi
 
 
-@persistent_jit
+@jax.jit
 def batch_verdict(problem, basis, mu, V):
     """Stability verdicts of a chunk from its multipliers and Floquet modes."""
     return jax.vmap(verdict, in_axes=(None, None, 0, 0))(problem, basis, mu, V)
