@@ -141,8 +141,7 @@ def _jump(ctx, plan, lam, mult, X, last, step, eta, K_last=None) -> Seed | None:
     moves on the same way, or a largest step beyond where it turns (a fold). ``eta``:
     the period of the branch's solutions ``X`` (the landing orbit is one of ``ctx``'s)."""
     f = np.asarray(lam) * ctx.from_hz
-    span = ctx.to_hz - ctx.from_hz
-    max_step = ctx.max_step_hz or abs(span) / 100
+    max_step = _walk.largest_step_hz(ctx.max_step_hz, ctx.to_hz - ctx.from_hz)
     k = last + step
     if not 0 <= k < len(f):
         return None

@@ -368,11 +368,17 @@ def exceeds(system, X, limit) -> bool:
     return bool(np.any(np.sqrt(0.5 * np.sum(deflection ** 2, axis=0)) > limit))
 
 
+def largest_step_hz(max_step_hz, span_hz) -> float:
+    """The largest frequency step of a continuation (Hz): ``max_step_hz``, by default
+    1/100 of the band ``span_hz``."""
+    return max_step_hz or abs(span_hz) / 100
+
+
 def restart_step(max_step_hz, span_hz) -> float:
     """Frequency step (Hz, > 0) from the furthest point of a branch to the next branch's
     start: a quarter of the largest continuation step (doubled per failed start by the
     caller)."""
-    return 0.25 * (max_step_hz or abs(span_hz) / 100)
+    return 0.25 * largest_step_hz(max_step_hz, span_hz)
 
 
 def continuation_settings(max_step_hz, span_hz, f_ref):
@@ -380,6 +386,6 @@ def continuation_settings(max_step_hz, span_hz, f_ref):
     the band ``span_hz``), in units of the start frequency ``f_ref``; the step grows
     after at most 6 corrector iterations; the corrector's LU in single precision
     (``Settings.single``: the same iterations and folds, faster)."""
-    max_step_hz = max_step_hz or abs(span_hz) / 100
+    max_step_hz = largest_step_hz(max_step_hz, span_hz)
     return _continuation.Settings(step=0.02, max_step=0.5, fast=6, single=True,
                                   max_dlambda=float(max_step_hz / f_ref), fold_step=1e-3)
