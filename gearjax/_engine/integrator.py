@@ -50,6 +50,11 @@ class Integrator(eqx.Module):
                 raise ValueError(f"{name}.{field} must be positive, not "
                                  f"{getattr(self, field)!r}.")
 
+    def controller(self) -> dfx.PIDController:
+        """The step-size controller of these settings."""
+        return dfx.PIDController(rtol=self.rtol, atol=self.atol, pcoeff=self.pcoeff,
+                                 icoeff=self.icoeff)
+
 
 class Leg(eqx.Module):
     """The end of an integration: the state ``z`` at the end time, whether the solver
@@ -68,10 +73,8 @@ def integrate(settings: Integrator, term, t0, t1, z0, args, max_steps: int) -> L
     controller, at most ``max_steps`` steps, its first step chosen by the controller
     (jittable; no host callback in the program, module docstring). **Returns:** a
     :class:`Leg` (``z`` the last state reached where the solver stopped early)."""
-    controller = dfx.PIDController(rtol=settings.rtol, atol=settings.atol,
-                                   pcoeff=settings.pcoeff, icoeff=settings.icoeff)
     sol = dfx.diffeqsolve(term, settings.solver, t0, t1, None, z0, args=args,
-                          saveat=dfx.SaveAt(t1=True), stepsize_controller=controller,
+                          saveat=dfx.SaveAt(t1=True), stepsize_controller=settings.controller(),
                           max_steps=max_steps, adjoint=dfx.ForwardMode(), throw=False)
     return Leg(z=sol.ys[-1], ok=sol.result == dfx.RESULTS.successful, result=sol.result,
                steps=sol.stats["num_accepted_steps"], rejected=sol.stats["num_rejected_steps"])
@@ -85,14 +88,14 @@ def sample(settings: Integrator, term, t0, z0, ts, args, max_steps: int):
     **Returns:** ``(zs, leg)``: ``zs`` ``(S, d)`` and the :class:`Leg` of the whole
     (``z`` the state at ``ts[-1]``, ``ok`` and ``result`` of the first interval that
     failed, steps summed). Past a failed interval the states stay at the last one
-    reached.
+    reached, and no more steps are taken (the intervals after it have no length).
     """
     def one(c, t1):
         t, z, ok, result, steps, rejected = c
-        leg = integrate(settings, term, t, t1, z, args, max_steps)
+        leg = integrate(settings, term, t, jnp.where(ok, t1, t), z, args, max_steps)
         good = ok & leg.ok
         z1 = jnp.where(good, leg.z, z)
-        carry = (t1, z1, good, dfx.RESULTS.where(ok, leg.result, result),
+        carry = (jnp.where(good, t1, t), z1, good, dfx.RESULTS.where(ok, leg.result, result),
                  steps + jnp.where(ok, leg.steps, 0), rejected + jnp.where(ok, leg.rejected, 0))
         return carry, z1
 

@@ -463,10 +463,11 @@ def _positive(omega, caller: str) -> None:
     one integrates nothing and gives ``nonfinite`` (``_steady_state``)."""
     if isinstance(omega, jax.core.Tracer):
         return
-    w = np.asarray(omega, dtype=float)
-    if not np.all(w > 0):
+    w = np.asarray(omega, dtype=float).reshape(-1)
+    bad = w[~(w > 0)]
+    if bad.size:
         raise ValueError(f"{caller}: the base frequency omega must be positive (rad/s), not "
-                         f"{float(w.reshape(-1)[~(w.reshape(-1) > 0)][0])!r}")
+                         f"{float(bad[0])!r}")
 
 
 def _arrays(*values):

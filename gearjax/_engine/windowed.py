@@ -231,8 +231,7 @@ def _windows(problem: IntegrationProblem, plan: WindowPlan, F_static, omega, x0,
     T = plan.periods * plan.samples
     frac = jnp.arange(T) / T
     term = dfx.ODETerm(vector_field)
-    controller = dfx.PIDController(rtol=settings.rtol, atol=settings.atol,
-                                   pcoeff=settings.pcoeff, icoeff=settings.icoeff)
+    controller = settings.controller()
 
     def save_mesh(tau, z, args):
         _, _, p, _, F = mesh_samples(problem, omega, tau[None], z[:, None])
