@@ -47,8 +47,9 @@ from . import hb as _hb
 class Factors(eqx.Module):
     """Factors of a bordered Jacobian (:func:`factor`).
 
-    ``lu``, ``piv``: LU of the condensed bordered matrix, ``(C r + 1)^2`` (the full
-    ``(C n + 1)^2`` one when not condensed, and the other fields ``None``); in single
+    ``lu``, ``perm``: LU of the condensed bordered matrix ``M``, ``(C r + 1)^2`` (the full
+    ``(C n + 1)^2`` one when not condensed, and the other fields ``None``), with ``M[perm]
+    = L U`` (``L`` unit lower triangular, both in ``lu``); in single
     precision when factorised with ``single``, and :func:`solve` then solves with them in
     single precision, everything around in double. ``R`` ``(n, n)``: unknown basis
     ``[u | v]``; ``P`` ``(C, n, n)``: equation basis per coefficient row. Per group of
@@ -58,7 +59,7 @@ class Factors(eqx.Module):
     """
 
     lu: Array
-    piv: Array
+    perm: Array
     R: Array | None = None
     P: Array | None = None
     Vinv: tuple | None = None
@@ -122,15 +123,15 @@ def factor(problem: _hb.HBProblem, y: Array, omega, g: Array, ty: Array, tlam,
     col = _join([u - jnp.einsum("gij,gj->gi", b[3], v) for b, u, v in zip(blocks, gu, gv)], K)
     row = _join([u - jnp.einsum("gji,gj->gi", b[2], v) for b, u, v in zip(blocks, tu, tv)], K)
     corner = tlam - sum(jnp.sum(w * v) for w, v in zip(wv, gv))
-    lu, piv = _bordered_lu(A, col.reshape(-1), row.reshape(-1), corner, single)
-    return Factors(lu=lu, piv=piv, R=R, P=Pc, Vinv=tuple(b[1] for b in blocks),
+    lu, perm = _bordered_lu(A, col.reshape(-1), row.reshape(-1), corner, single)
+    return Factors(lu=lu, perm=perm, R=R, P=Pc, Vinv=tuple(b[1] for b in blocks),
                    E=tuple(b[2] for b in blocks), F=tuple(b[3] for b in blocks), hv=hv, wv=wv)
 
 
 def dense(J: Array, g: Array, ty: Array, tlam, single: bool = False) -> Factors:
     """Factorise ``[[J, g], [ty^T, tlam]]`` as it is (``J`` ``(N, N)``; jittable)."""
-    lu, piv = _bordered_lu(J, g, ty, tlam, single)
-    return Factors(lu=lu, piv=piv)
+    lu, perm = _bordered_lu(J, g, ty, tlam, single)
+    return Factors(lu=lu, perm=perm)
 
 
 def jacobian_factors(problem: _hb.HBProblem, y: Array, omega) -> Factors:
@@ -169,18 +170,61 @@ def solve(factors: Factors, rhs: Array) -> Array:
 
 
 def _bordered_lu(A: Array, col: Array, row: Array, corner, single: bool = False):
-    """LU factors of ``[[A, col], [row^T, corner]]``, in single precision with ``single``
-    (:func:`factor`)."""
+    """LU factors ``(lu, perm)`` of ``[[A, col], [row^T, corner]]`` (:class:`Factors`), in
+    single precision with ``single`` (:func:`factor`)."""
     top = jnp.concatenate([A, col[:, None]], axis=1)
     bottom = jnp.concatenate([row, jnp.asarray(corner)[None]])[None, :]
     M = jnp.concatenate([top, bottom], axis=0)
-    return jax.scipy.linalg.lu_factor(M.astype(jnp.float32) if single else M)
+    lu, _, perm = jax.lax.linalg.lu(M.astype(jnp.float32) if single else M)
+    return _pad_blocks(lu), perm
+
+
+TRIANGLE_BLOCK = 64
+"""Rows per block of :func:`_triangular_solve`."""
+
+
+def _pad_blocks(lu: Array) -> Array:
+    """``lu`` ``(p, p)`` padded to whole blocks of :data:`TRIANGLE_BLOCK` rows, with a unit
+    diagonal in the padding (the triangles of the padded matrix are those of ``lu`` and
+    an identity beside them)."""
+    p = lu.shape[0]
+    q = -(-p // TRIANGLE_BLOCK) * TRIANGLE_BLOCK
+    pad = jnp.arange(p, q)
+    return jnp.pad(lu, (0, q - p)).at[pad, pad].set(1.0)
 
 
 def _lu_solve(factors: Factors, rhs: Array) -> Array:
     """``rhs`` solved with the LU factors, in their precision, returned in ``rhs``'s."""
-    return jax.scipy.linalg.lu_solve((factors.lu, factors.piv),
-                                     rhs.astype(factors.lu.dtype)).astype(rhs.dtype)
+    lu = factors.lu
+    p = factors.perm.shape[0]
+    b = jnp.pad(rhs.astype(lu.dtype)[factors.perm], (0, lu.shape[0] - p))
+    x = _triangular_solve(lu, _triangular_solve(lu, b, lower=True), lower=False)
+    return x[:p].astype(rhs.dtype)
+
+
+def _triangular_solve(lu: Array, b: Array, lower: bool) -> Array:
+    """``T^-1 b`` ``(q,)`` for the triangle ``T`` of ``lu`` ``(q, q)`` (whole blocks,
+    :func:`_pad_blocks`): the unit lower one (``lower``) or the upper one with the
+    diagonal.
+
+    Block by block of :data:`TRIANGLE_BLOCK` rows (a scan: one body to trace): the
+    rows' product with the part of the solution found so far (zero elsewhere), then a
+    small triangular solve. XLA's CPU kernel for one right-hand side works through the
+    whole triangle element by element; here most of the work is matrix-vector products
+    (docs/benchmarks.md). The result agrees with a direct solve to round-off.
+    """
+    q, m = b.shape[0], TRIANGLE_BLOCK
+
+    def block(x, part):
+        i, rows = part  # the block's first row, its rows (m, q)
+        r = jax.lax.dynamic_slice_in_dim(b, i, m) - rows @ x
+        d = jax.lax.dynamic_slice_in_dim(rows, i, m, axis=1)
+        xi = jax.lax.linalg.triangular_solve(d, r[:, None], left_side=True, lower=lower,
+                                             unit_diagonal=lower)[:, 0]
+        return jax.lax.dynamic_update_slice_in_dim(x, xi, i, 0), None
+
+    parts = (jnp.arange(0, q, m), lu.reshape(q // m, m, q))
+    return jax.lax.scan(block, jnp.zeros_like(b), parts, reverse=not lower)[0]
 
 
 def _complete_bases(A: Array) -> Array:
