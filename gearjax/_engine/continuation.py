@@ -109,6 +109,9 @@ class Settings(eqx.Module):
     (the corrector's start, the tangent) in single precision, residual, iterates and
     tangent in double (the quasi-Newton corrector converges to the same ``rtol``; the
     tangent is refined, :func:`_tangent`); the full-Newton fallback factorises in double.
+    ``reuse``: keep the factors of an earlier point for as long as they carry the corrector
+    within ``fast`` iterations and the tangent's refinement contracts
+    (:func:`arclength_step`), instead of factorising at every point.
     """
 
     step: float = eqx.field(static=True, default=0.02)
@@ -121,6 +124,7 @@ class Settings(eqx.Module):
     rtol: float = eqx.field(static=True, default=1e-9)
     fold_step: float = eqx.field(static=True, default=1e-3)
     single: bool = eqx.field(static=True, default=False)
+    reuse: bool = eqx.field(static=True, default=False)
 
 
 class ArcState(eqx.Module):
@@ -131,7 +135,10 @@ class ArcState(eqx.Module):
     succeeded; ``fold``: the accepted step crossed a fold (``tlam`` changed sign);
     ``fold_lam``: its located parameter value; ``steps``: corrector iterations;
     ``factors``: of the bordered Jacobian at the current point (``_bordered.Factors``),
-    reused by the next corrector (Broyden from them: one factorisation per point).
+    reused by the next corrector (Broyden from them: one factorisation per point), or at an
+    earlier one (``Settings.reuse``): ``age`` accepted points back, last row that point's
+    own tangent where ``own`` is set, else the tangent of the point before it (or, for
+    the first point of a continuation, the tangent :func:`start` began from).
     """
 
     y: Array
@@ -144,42 +151,62 @@ class ArcState(eqx.Module):
     fold_lam: Array
     steps: Array
     factors: _bordered.Factors
+    age: Array
+    own: Array
 
 
-def _tangent(param: AbstractParameter, y, lam, ty, tlam, single: bool):
-    """Factors of the bordered Jacobian at ``(y, lam)`` (last row the previous tangent
-    ``(ty, tlam)``) and the solution ``t`` ``(N + 1,)`` of ``[[J, g], [ty^T, tlam]] t =
-    e_last`` (the tangent, not normalised, oriented along the previous one):
-    ``(t, factors, ok)``.
+def _tangent(param: AbstractParameter, y, lam, ty, tlam, factors, single: bool, fresh=True):
+    """The solution ``t`` ``(N + 1,)`` of ``[[J, g], [ty^T, tlam]] t = e_last`` at ``(y,
+    lam)`` (the tangent, not normalised, oriented along the previous one ``(ty, tlam)``, a
+    unit vector) from ``factors`` of the bordered Jacobian, and whether it is accurate:
+    ``(t, ok)``.
 
-    With ``single`` (:class:`Settings`) the dense LU is in single precision and ``t`` is
-    refined in double with the exact bordered product (a Jacobian-vector product of the
-    residual) until the last correction is below :data:`SINGLE_TOL` of ``t``, at most
-    :data:`SINGLE_REFINE` times; ``ok`` says whether it got there (always true in double).
+    From ``fresh`` factors (of this point and border; a boolean, may be traced) ``t`` is
+    one solve: exact in double, ``ok`` true. From single-precision ones (``single``,
+    :class:`Settings`), or from factors of an earlier point (``fresh`` false, starting
+    from ``(ty, tlam)``), ``t`` is refined in double against the exact bordered product (a
+    Jacobian-vector product of the residual). The error left after a correction ``d`` is
+    estimated from the contraction ``rho = |d| / |d_before|`` (the solve counts as the
+    first correction) as ``|d| rho / (1 - rho)``; ``ok``: that estimate fell below
+    :data:`SINGLE_TOL` of ``t`` within :data:`SINGLE_REFINE` corrections, and, from earlier
+    factors, below a quarter of ``|t[-1]|`` (``d lambda / ds``, whose sign marks a fold:
+    near a fold the point is factorised afresh).
     """
     e = jnp.zeros(y.shape[0] + 1).at[-1].set(1.0)
-    factors = param.factor(y, lam, ty, tlam, single)
-    t = _bordered.solve(factors, e)
-    if not single:
-        return t, factors, jnp.asarray(True)
+    if fresh is True and not single:
+        return _bordered.solve(factors, e), jnp.asarray(True)
+    t = jax.lax.cond(fresh, lambda: _bordered.solve(factors, e), lambda: jnp.append(ty, tlam))
+    size = jnp.where(fresh, jnp.linalg.norm(t), jnp.inf)
+    exact = fresh & (not single)
 
     def refine(c):
-        t, _, i = c
+        t, size, _, i = c
         Jt = jax.jvp(param.residual, (y, lam), (t[:-1], t[-1]))[1]
         d = _bordered.solve(factors, e - jnp.concatenate([Jt, (ty @ t[:-1] + tlam * t[-1])[None]]))
-        return t + d, jnp.linalg.norm(d) / jnp.linalg.norm(t), i + 1
+        new = jnp.linalg.norm(d)
+        rho = new / size  # no estimate after the first correction from an old tangent
+        contracts = jnp.isfinite(size) & (rho < 1)
+        error = jnp.where(contracts, new * rho / jnp.where(contracts, 1 - rho, 1.0), jnp.inf)
+        return t + d, new, error, i + 1
 
-    t, change, _ = jax.lax.while_loop(lambda c: (c[1] > SINGLE_TOL) & (c[2] < SINGLE_REFINE),
-                                      refine, (t, jnp.asarray(jnp.inf), jnp.asarray(0)))
-    return t, factors, change <= SINGLE_TOL
+    def go_on(c):
+        t, _, error, i = c
+        return ~(error <= SINGLE_TOL * jnp.linalg.norm(t)) & (i < SINGLE_REFINE)
+
+    t, _, error, _ = jax.lax.while_loop(go_on, refine, (t, size, jnp.where(exact, 0.0, jnp.inf),
+                                                        jnp.asarray(0)))
+    # from earlier factors the refinement stops near the tolerance: its d lambda / ds must
+    # be well clear of that error too, or its sign (which marks a fold) is not known
+    clear = fresh | (4 * error <= jnp.abs(t[-1]))
+    return t, (error <= SINGLE_TOL * jnp.linalg.norm(t)) & clear
 
 
 SINGLE_REFINE = 4
-"""Most refinement steps of a tangent from single-precision factors (:func:`_tangent`)."""
+"""Most refinement steps of a tangent (:func:`_tangent`)."""
 
 SINGLE_TOL = 1e-4
-"""Refinement of such a tangent stops after a correction below this fraction of it (the
-error left is about that correction times the refinement's contraction ratio)."""
+"""A refined tangent is accurate where its estimated error is below this fraction of it
+(:func:`_tangent`)."""
 
 
 def tangent_factors(param: AbstractParameter, y, lam, ty, tlam, single: bool = False,
@@ -191,7 +218,8 @@ def tangent_factors(param: AbstractParameter, y, lam, ty, tlam, single: bool = F
     point, a tangent from double factors)."""
     if single and fallback is None:
         raise ValueError("tangent_factors with single=True needs a fallback tangent")
-    t, factors, ok = _tangent(param, y, lam, ty, tlam, single)
+    factors = param.factor(y, lam, ty, tlam, single)
+    t, ok = _tangent(param, y, lam, ty, tlam, factors, single)
     if single:
         t = jnp.where(ok, t, fallback)
     t = t / jnp.linalg.norm(t)
@@ -212,42 +240,80 @@ def start(param: AbstractParameter, y, lam, direction, settings: Settings) -> Ar
     return ArcState(y=y, lam=lam, ty=ty, tlam=tlam,
                     h=jnp.asarray(settings.step, float), accepted=jnp.asarray(True),
                     fold=jnp.asarray(False), fold_lam=jnp.asarray(jnp.nan, float),
-                    steps=jnp.asarray(0), factors=factors)
+                    steps=jnp.asarray(0), factors=factors, age=jnp.asarray(0),
+                    own=jnp.asarray(False))
 
 
 def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings) -> ArcState:
     """One predictor-corrector attempt from ``state`` (jittable).
 
     The corrector (:func:`gearjax._engine.corrector.correct`) is Broyden's method started
-    from the bordered Jacobian factorised at the current point, with a full-Newton
-    restart when it stops contracting; the new point's Jacobian is factorised once, for
-    its tangent and for the next corrector. On success the state moves to the new point
-    with a grown or kept step; on failure it stays and the step halves (the caller stops
-    below ``min_step``).
+    from the state's factors of the bordered Jacobian, with a full-Newton restart when it
+    stops contracting; the new point's Jacobian is factorised once, for its tangent and
+    for the next corrector. On success the state moves to the new point with a grown or
+    kept step; on failure it stays and the step halves (the caller stops below
+    ``min_step``).
 
-    The returned ``factors`` are those of the new point whenever the corrector
-    converged, also for an attempt that is not accepted (a fold crossed with a long
-    step): :func:`keep_factors` puts the state's back there (a select over the factors is
-    itself a pass over the matrix, which the Python driver does without).
+    With ``settings.reuse`` the factors are those of an earlier point for as long as they
+    serve: where the corrector from them does not converge, the bordered Jacobian is
+    factorised at the last point (last row its tangent) and the corrector runs again from
+    those (with its full-Newton restart); at the new point the tangent is refined from
+    the last one with the factors in hand (:func:`_tangent`), and the new point is
+    factorised only where that refinement does not reach :data:`SINGLE_TOL` or the
+    corrector took more than ``settings.fast`` iterations.
+
+    The returned ``factors`` (with ``age`` and ``own``) are those the returned state
+    continues from: the new point's where accepted, else those the corrector used.
     """
     h = jnp.minimum(state.h, settings.max_dlambda / jnp.maximum(jnp.abs(state.tlam), 1e-12))
     y_p = state.y + h * state.ty
     lam_p = state.lam + h * state.tlam
+    stale = (state.age > 0) & settings.reuse
 
-    y, lam, k, converged = _corrector.correct(param, state.factors, state.ty, state.tlam,
-                                             y_p, lam_p, settings.rtol,
-                                             settings.max_corrector)
+    def correct(factors, fresh, before):
+        y, lam, k, converged = _corrector.correct(
+            param, factors, state.ty, state.tlam, y_p, lam_p, settings.rtol,
+            settings.max_corrector, fresh | ~stale)
+        return (y, lam, before[2] + k, converged), converged
+
+    def at_last_point():
+        return (param.factor(state.y, state.lam, state.ty, state.tlam, settings.single),
+                jnp.asarray(0), jnp.asarray(True))
+
+    held = (state.factors, state.age, state.own)
+    if settings.reuse:
+        (y, lam, k, converged), _, held = _held_or_fresh(
+            correct, (y_p, lam_p, jnp.asarray(0), jnp.asarray(False)), held, at_last_point,
+            True, stale)
+    else:
+        (y, lam, k, converged), _ = correct(state.factors, True, (None, None, 0))
 
     def new_tangent(_):
+        def tangent(factors, fresh, _):
+            return _tangent(param, y, lam, state.ty, state.tlam, factors, settings.single,
+                            fresh)
+
+        def at_new_point():
+            return (param.factor(y, lam, state.ty, state.tlam, settings.single),
+                    jnp.asarray(0), jnp.asarray(False))
+
+        if settings.reuse:
+            aged = (held[0], held[1] + 1, held[2])
+            t, ok, factors = _held_or_fresh(tangent, jnp.zeros(y.shape[0] + 1), aged,
+                                            at_new_point, k <= settings.fast, True)
+        else:
+            factors = at_new_point()
+            t, ok = tangent(factors[0], True, None)
         # where the tangent from single-precision factors does not converge (a nearly
         # singular Jacobian), the chord from the last point stands in for it
-        chord = jnp.concatenate([y - state.y, (lam - state.lam)[None]])
-        return tangent_factors(param, y, lam, state.ty, state.tlam, settings.single, chord)
+        t = jnp.where(ok, t, jnp.concatenate([y - state.y, (lam - state.lam)[None]]))
+        t = t / jnp.linalg.norm(t)
+        return (t[:-1], t[-1]), factors
 
     def old_tangent(_):
-        return state.ty, state.tlam, state.factors
+        return (state.ty, state.tlam), held
 
-    ty, tlam, factors = jax.lax.cond(converged, new_tangent, old_tangent, None)
+    (ty, tlam), factors = jax.lax.cond(converged, new_tangent, old_tangent, None)
     crossed = converged & (jnp.sign(tlam) != jnp.sign(state.tlam))
     # a fold crossed with a long step is approached again with shorter ones, so that
     # the interpolated fold location below is accurate
@@ -263,6 +329,7 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
     grow = jnp.where(k <= settings.fast, 1.5, jnp.where(k >= settings.slow, 0.6, 1.0))
     h_next = jnp.where(accepted, jnp.minimum(h * grow, settings.max_step),
                        jnp.where(refine, jnp.maximum(h * 0.25, settings.fold_step), h * 0.5))
+    factors, age, own = jax.lax.cond(accepted, lambda _: factors, lambda _: held, None)
     keep = lambda new, old: jnp.where(accepted, new, old)  # noqa: E731
     return ArcState(
         y=keep(y, state.y),
@@ -275,20 +342,37 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
         fold_lam=fold_lam,
         steps=k,
         factors=factors,
+        age=age,
+        own=own,
     )
 
 
-def keep_factors(old: ArcState, new: ArcState) -> ArcState:
-    """``new`` with ``old``'s factors where the attempt was not accepted (jittable)."""
-    return _replace(new, factors=jax.tree.map(lambda a, b: jnp.where(new.accepted, a, b),
-                                              new.factors, old.factors))
+def _held_or_fresh(attempt, empty, held, refactor, use_held, retry):
+    """``attempt(factors, fresh, before) -> (out, ok)`` with the factors ``held`` where
+    ``use_held``, else with fresh ones (``refactor()``); where the held ones do not serve
+    (``ok`` false) and ``retry``, again with fresh ones (``before``: the first attempt's
+    ``out``). ``held`` and ``refactor()`` are ``(factors, age, own)`` (:class:`ArcState`);
+    ``empty``: an ``out`` of the right shapes; the booleans may be traced. A loop of at most
+    two attempts, so that ``attempt`` and ``refactor`` are traced once (jittable).
 
+    **Returns:** ``(out, ok, (factors, age, own))`` of the last attempt.
+    """
+    use_held, retry = jnp.asarray(use_held, bool), jnp.asarray(retry, bool)
 
-def _replace(module, **fields):
-    """A copy of the equinox module ``module`` with ``fields`` replaced."""
-    names = tuple(fields)
-    return eqx.tree_at(lambda m: tuple(getattr(m, n) for n in names), module,
-                       tuple(fields[n] for n in names))
+    def body(c):
+        i, before, _, used = c
+        fresh = ~use_held | (i > 0)
+        used = jax.lax.cond(fresh, lambda _: refactor(), lambda u: u, used)
+        out, ok = attempt(used[0], fresh, before)
+        return i + 1, out, ok, used
+
+    def go_on(c):
+        i, _, ok, _ = c
+        return (i == 0) | ((i == 1) & ~ok & use_held & retry)
+
+    _, out, ok, used = jax.lax.while_loop(go_on, body, (jnp.asarray(0), empty,
+                                                        jnp.asarray(False), held))
+    return out, ok, used
 
 
 class Branch(eqx.Module):
@@ -352,7 +436,7 @@ def continue_compiled(param: AbstractParameter, y0, lam0, lam_end, settings: Set
 
     def body(c):
         st, ys, lams, folds, fold_lams, n, _ = c
-        new = keep_factors(st, arclength_step(param, st, settings))
+        new = arclength_step(param, st, settings)
         ys = jnp.where(new.accepted, ys.at[n].set(new.y), ys)
         lams = jnp.where(new.accepted, lams.at[n].set(new.lam), lams)
         folds = jnp.where(new.accepted, folds.at[n].set(new.fold), folds)
@@ -392,7 +476,7 @@ def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Setti
     step = _arclength_step_jit
     direction = float(np.sign(lam_end - lam0))
     if state is None:
-        state = _start_jit(param, y0, lam0, direction, settings)
+        state = start_jit(param, y0, lam0, direction, settings)
     rows = [(np.asarray(state.y), float(state.lam), 0, False, np.nan,
              np.concatenate([np.asarray(state.ty), [float(state.tlam)]]), float(state.h))]
     trace = Trace(max_points, rows[0][0].size + 1)
@@ -401,9 +485,7 @@ def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Setti
         on_point(0, state)
     stop = RESULTS.max_points
     while len(rows) < max_points:
-        new = step(param, state, settings)
-        # a rejected attempt keeps the factors of the point it started from
-        state = new if bool(new.accepted) else _replace(new, factors=state.factors)
+        state = step(param, state, settings)
         if not bool(jnp.all(jnp.isfinite(state.y))):
             stop = RESULTS.nonfinite
             break
@@ -469,4 +551,4 @@ class Trace:
 
 
 _arclength_step_jit = jax.jit(arclength_step, static_argnums=(2,))
-_start_jit = jax.jit(start, static_argnums=(4,))
+start_jit = jax.jit(start, static_argnums=(4,))

@@ -67,13 +67,16 @@ def broyden_step(z, steps, i):
 
 
 def correct(param, factors: _bordered.Factors, ty, tlam, y_p, lam_p, rtol: float,
-            max_corrector: int):
+            max_corrector: int, full_newton=True):
     """Correct the predictor ``(y_p, lam_p)`` onto the branch of ``param`` (jittable).
 
     **Arguments:** ``param``: the residual ``G`` and its bordered factorisation
     (``residual(y, lam)``, ``factor(y, lam, ty, tlam)``); ``factors``: the bordered
     Jacobian at the last point, last row the tangent ``(ty, tlam)`` ``((N,), scalar)``
-    there; ``rtol``: tolerance; ``max_corrector``: iterations per phase.
+    there; ``rtol``: tolerance; ``max_corrector``: iterations per phase; ``full_newton`` (a
+    boolean, may be traced): whether a stalled quasi-Newton phase goes on in full Newton
+    (else it ends there, not converged: factors from an earlier point, which the caller
+    replaces).
 
     **Returns:** ``(y, lam, iterations, converged)``: the last iterate (the last finite
     one), the iterations of both phases together, and whether it converged.
@@ -121,7 +124,8 @@ def correct(param, factors: _bordered.Factors, ty, tlam, y_p, lam_p, rtol: float
                       steps=jnp.zeros((max_corrector + 1, y_p.shape[0] + 1)))
     c = jax.lax.while_loop(not_done, broyden, init)
     # the quasi-Newton phase stalled: full Newton from the predictor (flag ``full`` set)
-    c = jax.lax.cond(c.full, lambda c: jax.lax.while_loop(not_done, newton, dataclasses.replace(
+    restart = lambda c: jax.lax.while_loop(not_done, newton, dataclasses.replace(  # noqa: E731
         c, y=y_p, lam=lam_p, i=jnp.asarray(0), done=jnp.asarray(False),
-        prev=jnp.asarray(jnp.inf))), lambda c: c, c)
+        prev=jnp.asarray(jnp.inf)))
+    c = jax.lax.cond(c.full & full_newton, restart, lambda c: c, c)
     return c.y, c.lam, c.k, c.converged

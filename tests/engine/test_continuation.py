@@ -1,5 +1,7 @@
 """Pseudo-arclength continuation through the folds of the clearance oscillator."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -196,3 +198,75 @@ def test_single_precision_factors(paper_system_h1):
     np.testing.assert_allclose(t_single, t_double, atol=1e-10)
     error = float(jnp.linalg.norm(x_single - x_double) / jnp.linalg.norm(x_double))
     assert 1e-12 < error < 1e-3  # single-precision solves: not exact, and close
+
+
+def _walk(param, state, settings, lam_end, attempts=1000):
+    """Accepted states of ``arclength_step`` from ``state`` until ``lam_end``."""
+    states = [state]
+    for _ in range(attempts):
+        if float(state.lam) >= lam_end:
+            break
+        state = C._arclength_step_jit(param, state, settings)
+        if bool(state.accepted):
+            states.append(state)
+    return states
+
+
+def test_reused_factors_follow_the_same_branch(branch):
+    """``Settings.reuse``: the same branch through both folds (folds within the fold
+    step of those factorised at every point, and of pyHarm's), most points without a
+    factorisation of their own, and every point on the branch (residual at the
+    corrector's tolerance)."""
+    param, y0 = branch["param"], branch["y0"]
+    settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02, reuse=True)
+    states = _walk(param, C.start_jit(param, y0, 0.5, 1.0, settings), settings, 1.5)
+    folds = C.distinct_folds(np.array([float(s.fold_lam) for s in states if bool(s.fold)]))
+    np.testing.assert_allclose(folds, branch["folds"], atol=settings.fold_step)
+    np.testing.assert_allclose(folds, [0.6365, 0.852], atol=2e-3)
+    ages = np.array([int(s.age) for s in states])
+    assert np.sum(ages == 0) < 0.8 * len(states) and ages.max() > 1
+    residual = jax.jit(lambda y, lam: param.residual(y, lam))
+    assert max(float(jnp.max(jnp.abs(residual(s.y, s.lam)))) for s in states) < 1e-4
+
+
+def test_stale_factors_that_fail_are_replaced_at_the_last_point(branch):
+    """Factors from the branch's start (lambda 0.5, the contact branch) do not carry the
+    corrector on the impacting branch at 0.84: the step factorises at the last point
+    (``own``: last row its own tangent) and corrects again, and the continuation goes on
+    from those factors through both folds."""
+    param, y0 = branch["param"], branch["y0"]
+    settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02, reuse=True)
+    first = C.start_jit(param, y0, 0.5, 1.0, settings)
+    states = _walk(param, first, settings, 0.84)
+    stale = dataclasses.replace(states[-1], factors=first.factors,
+                                age=jnp.asarray(len(states) - 1), own=jnp.asarray(False))
+    new = C._arclength_step_jit(param, stale, settings)
+    assert bool(new.own) and int(new.age) == int(new.accepted)
+    after = _walk(param, new, settings, 1.5)
+    assert float(after[-1].lam) >= 1.5
+    np.testing.assert_allclose(C.distinct_folds(np.array(
+        [float(s.fold_lam) for s in after if bool(s.fold)])), [0.6365, 0.852], atol=2e-3)
+
+
+def test_a_resumed_state_has_the_factors_the_continuation_had(branch):
+    """``walk.resumed_state`` rebuilds, from saved points alone, the factors each state
+    continues from: those of the start, of a later point with the tangent before it in
+    the last row, and (after stale factors failed) of a point with its own tangent."""
+    from gearjax._studies.sweep.walk import resumed_state
+
+    param, y0 = branch["param"], branch["y0"]
+    settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02, reuse=True)
+    first = C.start_jit(param, y0, 0.5, 1.0, settings)
+    states = _walk(param, first, settings, 0.84)
+    stale = dataclasses.replace(states[-1], factors=first.factors,
+                                age=jnp.asarray(len(states) - 1), own=jnp.asarray(False))
+    states += _walk(param, stale, settings, 1.0)[1:]
+    have = [{"y": np.asarray(s.y), "lam": float(s.lam), "ty": np.asarray(s.ty),
+             "tlam": float(s.tlam), "h": float(s.h), "age": int(s.age), "own": bool(s.own)}
+            for s in states]
+    kinds = {(int(s.age) == i, bool(s.own)) for i, s in enumerate(states)}
+    assert {(True, False), (False, False), (False, True)} <= kinds
+    for i in range(1, len(have)):
+        rebuilt = resumed_state(param, have[:i + 1], settings, 1.0)
+        np.testing.assert_array_equal(rebuilt.factors.lu, states[i].factors.lu)
+        assert int(rebuilt.age) == have[i]["age"] and bool(rebuilt.own) == have[i]["own"]

@@ -225,7 +225,7 @@ def _away(param, y, lam, phi, h, single):
     return _continuation.ArcState(
         y=y, lam=lam, ty=ty, tlam=tlam, h=h, accepted=jnp.asarray(True),
         fold=jnp.asarray(False), fold_lam=jnp.asarray(jnp.nan, float), steps=jnp.asarray(0),
-        factors=factors)
+        factors=factors, age=jnp.asarray(0), own=jnp.asarray(False))
 
 
 def switch(ctx2, d: Doubling):

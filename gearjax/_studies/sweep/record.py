@@ -1,7 +1,7 @@
 """A sweep's finished work as records, in memory and in its journal
 (:mod:`gearjax._io.journal`).
 
-Records: ``{"type": "point", "segment", "i", "K", "y", "lam", "ty", "tlam", "h",
+Records: ``{"type": "point", "segment", "i", "K", "y", "lam", "ty", "tlam", "h", "age", "own",
 "steps", "fold", "fold_lam"}`` per continuation point, ``{"type": "end", "segment",
 "stop"}`` when a segment ends, ``{"type": "batch", "segment", "K", "omega", "X",
 "result"}`` per linear segment. The journal header's ``run`` fields are

@@ -264,7 +264,8 @@ def continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap,
         log.add({"type": "point", "segment": j, "i": offset + i, "K": K, "y": y, "lam": lam,
                  "ty": t[:-1], "tlam": float(t[-1]), "h": float(state.h),
                  "steps": int(state.steps), "fold": bool(state.fold),
-                 "fold_lam": fold_lam if math.isfinite(fold_lam) else None})
+                 "fold_lam": fold_lam if math.isfinite(fold_lam) else None,
+                 "age": int(state.age), "own": bool(state.own)})
         if found:
             found()
         if progress:
@@ -307,11 +308,7 @@ def continue_segment(log, j, K, param, previous, lam_a, lam_b, settings, *, cap,
     if len(have) >= cap:
         return result_word(RESULTS.max_points)
     # one saved point: the start state is rebuilt from it exactly as it was first built
-    state = None if len(have) == 1 else arc_state(
-        param, jnp.asarray(last["y"]), jnp.asarray(last["lam"], float),
-        jnp.asarray(last["ty"]), jnp.asarray(last["tlam"], float),
-        jnp.asarray(last["h"], float), jnp.asarray(have[-2]["ty"]),
-        jnp.asarray(have[-2]["tlam"], float), single=settings.single)
+    state = None if len(have) == 1 else resumed_state(param, have, settings, direction)
     try:
         return result_word(_continuation.continue_branch(
             param, jnp.asarray(last["y"]), last["lam"], lam_b, settings,
@@ -339,18 +336,36 @@ def segment_trace(have, cap):
     return trace
 
 
-@functools.partial(jax.jit, static_argnames="single")
-def arc_state(param, y, lam, ty, tlam, h, ty_before, tlam_before, single):
-    """The continuation state at an accepted point ``(y, lam)`` with tangent ``(ty, tlam)``
-    and next step ``h``: as ``arclength_step`` leaves it, with the bordered Jacobian
-    factorised with the tangent of the point before in its last row (the corrector
-    of the next step reuses those factors)."""
-    factors = _continuation.tangent_factors(param, y, lam, ty_before, tlam_before, single,
-                                            fallback=jnp.append(ty, tlam))[2]
+def resumed_state(param, have, settings, direction) -> _continuation.ArcState:
+    """The continuation state at the last of the saved points ``have`` (two or more) of a
+    segment, as ``arclength_step`` left it: its tangent and next step, and the factors
+    of the bordered Jacobian rebuilt where the continuation built them (``age`` and
+    ``own`` of the record, :class:`~gearjax._engine.continuation.ArcState`; a record
+    without them, from before factors were reused, had them built at the point itself):
+    at the point ``age`` records back, last row that point's tangent (``own``) or the
+    one before it, or as :func:`~gearjax._engine.continuation.start` built them at the
+    segment's first point."""
+    last = have[-1]
+    age, own = int(last.get("age", 0)), bool(last.get("own", False))
+    at = len(have) - 1 - age
+    point = jnp.asarray(have[at]["y"]), jnp.asarray(have[at]["lam"], float)
+    if own or at > 0:
+        border = have[at if own else at - 1]
+        factors = _factor(param, *point, jnp.asarray(border["ty"]),
+                          jnp.asarray(border["tlam"], float), settings.single)
+    else:
+        factors = _continuation.start_jit(param, *point, direction, settings).factors
     return _continuation.ArcState(
-        y=y, lam=lam, ty=ty, tlam=tlam, h=h, accepted=jnp.asarray(True),
+        y=jnp.asarray(last["y"]), lam=jnp.asarray(last["lam"], float),
+        ty=jnp.asarray(last["ty"]), tlam=jnp.asarray(last["tlam"], float),
+        h=jnp.asarray(last["h"], float), accepted=jnp.asarray(True),
         fold=jnp.asarray(False), fold_lam=jnp.asarray(jnp.nan, float), steps=jnp.asarray(0),
-        factors=factors)
+        factors=factors, age=jnp.asarray(age), own=jnp.asarray(own))
+
+
+@functools.partial(jax.jit, static_argnames="single")
+def _factor(param, y, lam, ty, tlam, single):
+    return param.factor(y, lam, ty, tlam, single)
 
 
 def ran_away(problem, y, limit) -> bool:
