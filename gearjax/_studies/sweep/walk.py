@@ -400,7 +400,8 @@ def continuation_settings(max_step_hz, span_hz, f_ref):
     """Continuation settings: parameter steps of at most ``max_step_hz`` (default 1/100 of
     the band ``span_hz``), in units of the start frequency ``f_ref``; the step grows
     after at most 6 corrector iterations; the corrector's LU in single precision
-    (``Settings.single``: the same iterations and folds, faster)."""
+    (``Settings.single``: the same iterations and folds, faster), kept from point to point
+    for as long as it serves (``Settings.reuse``)."""
     max_step_hz = largest_step_hz(max_step_hz, span_hz)
-    return _continuation.Settings(step=0.02, max_step=0.5, fast=6, single=True,
+    return _continuation.Settings(step=0.02, max_step=0.5, fast=6, single=True, reuse=True,
                                   max_dlambda=float(max_step_hz / f_ref), fold_step=1e-3)
