@@ -209,8 +209,8 @@ def _triangular_solve(lu: Array, b: Array, lower: bool) -> Array:
 
     Block by block of :data:`TRIANGLE_BLOCK` rows (a scan: one body to trace): the
     rows' product with the part of the solution found so far (zero elsewhere), then a
-    small triangular solve. XLA's CPU kernel for one right-hand side works through the
-    whole triangle element by element; here most of the work is matrix-vector products
+    small triangular solve. XLA's CPU kernel for a whole triangle with one right-hand side
+    is several times slower than matrix-vector products over the same entries
     (docs/benchmarks.md). The result agrees with a direct solve to round-off.
     """
     q, m = b.shape[0], TRIANGLE_BLOCK

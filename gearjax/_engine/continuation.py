@@ -110,7 +110,7 @@ class Settings(eqx.Module):
     tangent in double (the quasi-Newton corrector converges to the same ``rtol``; the
     tangent is refined, :func:`_tangent`); the full-Newton fallback factorises in double.
     ``reuse``: keep the factors of an earlier point for as long as they carry the corrector
-    within ``fast`` iterations and the tangent's refinement contracts
+    within ``fast`` iterations and the tangent refined with them is accurate
     (:func:`arclength_step`), instead of factorising at every point.
     """
 
@@ -166,8 +166,9 @@ def _tangent(param: AbstractParameter, y, lam, ty, tlam, factors, single: bool, 
     :class:`Settings`), or from factors of an earlier point (``fresh`` false, starting
     from ``(ty, tlam)``), ``t`` is refined in double against the exact bordered product (a
     Jacobian-vector product of the residual). The error left after a correction ``d`` is
-    estimated from the contraction ``rho = |d| / |d_before|`` (the solve counts as the
-    first correction) as ``|d| rho / (1 - rho)``; ``ok``: that estimate fell below
+    estimated from the contraction ``rho = |d| / |d_before|`` as ``|d| rho / (1 - rho)``
+    (from fresh factors the solve counts as the first correction; from an old tangent
+    there is no estimate before the second); ``ok``: that estimate fell below
     :data:`SINGLE_TOL` of ``t`` within :data:`SINGLE_REFINE` corrections, and, from earlier
     factors, below a quarter of ``|t[-1]|`` (``d lambda / ds``, whose sign marks a fold:
     near a fold the point is factorised afresh).
@@ -254,13 +255,17 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
     kept step; on failure it stays and the step halves (the caller stops below
     ``min_step``).
 
+    A corrected point further from the predictor than the step length (on another
+    stretch of the curve, across a fold) counts as not converged.
+
     With ``settings.reuse`` the factors are those of an earlier point for as long as they
     serve: where the corrector from them does not converge, the bordered Jacobian is
     factorised at the last point (last row its tangent) and the corrector runs again from
     those (with its full-Newton restart); at the new point the tangent is refined from
     the last one with the factors in hand (:func:`_tangent`), and the new point is
-    factorised only where that refinement does not reach :data:`SINGLE_TOL` or the
-    corrector took more than ``settings.fast`` iterations.
+    factorised only where that refinement does not reach :data:`SINGLE_TOL` (and a
+    quarter of ``|d lambda / ds|``) or the corrector took more than ``settings.fast``
+    iterations.
 
     The returned ``factors`` (with ``age`` and ``own``) are those the returned state
     continues from: the new point's where accepted, else those the corrector used.
@@ -274,6 +279,12 @@ def arclength_step(param: AbstractParameter, state: ArcState, settings: Settings
         y, lam, k, converged = _corrector.correct(
             param, factors, state.ty, state.tlam, y_p, lam_p, settings.rtol,
             settings.max_corrector, fresh | ~stale)
+        # the corrector may land on another stretch of the curve across the predictor's
+        # hyperplane (past a fold): a point further from the predictor than the step
+        # itself does not count as converged (old factors: corrected again from fresh
+        # ones; fresh: the step is retried shorter)
+        near = jnp.sqrt(jnp.sum((y - y_p) ** 2) + (lam - lam_p) ** 2) <= h
+        converged = converged & near
         return (y, lam, before[2] + k, converged), converged
 
     def at_last_point():

@@ -229,17 +229,25 @@ def test_reused_factors_follow_the_same_branch(branch):
     assert max(float(jnp.max(jnp.abs(residual(s.y, s.lam)))) for s in states) < 1e-4
 
 
+def _stale_at(branch, lam_end):
+    """``(param, settings, states, stale)``: the oscillator's branch with kept factors
+    from 0.5 to ``lam_end`` (its accepted states), and its last state with the start's
+    factors in place of its own."""
+    param = branch["param"]
+    settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02, reuse=True)
+    first = C.start_jit(param, branch["y0"], 0.5, 1.0, settings)
+    states = _walk(param, first, settings, lam_end)
+    stale = dataclasses.replace(states[-1], factors=first.factors,
+                                age=jnp.asarray(len(states) - 1), own=jnp.asarray(False))
+    return param, settings, states, stale
+
+
 def test_stale_factors_that_fail_are_replaced_at_the_last_point(branch):
     """Factors from the branch's start (lambda 0.5, the contact branch) do not carry the
     corrector on the impacting branch at 0.84: the step factorises at the last point
     (``own``: last row its own tangent) and corrects again, and the continuation goes on
     from those factors through both folds."""
-    param, y0 = branch["param"], branch["y0"]
-    settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02, reuse=True)
-    first = C.start_jit(param, y0, 0.5, 1.0, settings)
-    states = _walk(param, first, settings, 0.84)
-    stale = dataclasses.replace(states[-1], factors=first.factors,
-                                age=jnp.asarray(len(states) - 1), own=jnp.asarray(False))
+    param, settings, _, stale = _stale_at(branch, 0.84)
     new = C._arclength_step_jit(param, stale, settings)
     assert bool(new.own) and int(new.age) == int(new.accepted)
     after = _walk(param, new, settings, 1.5)
@@ -254,12 +262,7 @@ def test_a_resumed_state_has_the_factors_the_continuation_had(branch):
     the last row, and (after stale factors failed) of a point with its own tangent."""
     from gearjax._studies.sweep.walk import resumed_state
 
-    param, y0 = branch["param"], branch["y0"]
-    settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02, reuse=True)
-    first = C.start_jit(param, y0, 0.5, 1.0, settings)
-    states = _walk(param, first, settings, 0.84)
-    stale = dataclasses.replace(states[-1], factors=first.factors,
-                                age=jnp.asarray(len(states) - 1), own=jnp.asarray(False))
+    param, settings, states, stale = _stale_at(branch, 0.84)
     states += _walk(param, stale, settings, 1.0)[1:]
     have = [{"y": np.asarray(s.y), "lam": float(s.lam), "ty": np.asarray(s.ty),
              "tlam": float(s.tlam), "h": float(s.h), "age": int(s.age), "own": bool(s.own)}
