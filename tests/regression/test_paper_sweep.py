@@ -8,7 +8,8 @@ factorised at every point. Since the continuation keeps factors across points
 (``ContinuationSettings.reuse``), the corrector's iteration counts, and with them the
 steps, differ: the points are others on the same curves (298 then, 303 now). The
 located results keep the reference's tolerances: folds, the restart and the coexisting
-bands within 0.01 Hz. The peak RMS force per stage is taken over the stable points and
+bands within 0.01 Hz. The peak RMS force per stage is taken over the stable points (the
+reference's from the run of commit 21025e3, the last that factorised at every point) and
 compared within 0.05%: near the broad peak of the stable branch (1.sp, 3.5 kHz) the
 points are about 20 Hz apart, and a sampled maximum moves with them (0.03% here). The
 unstable points at the end of the detour before the restart are left out: where the
