@@ -42,6 +42,7 @@ from jaxtyping import Array
 
 from . import aft as _aft
 from . import hb as _hb
+from .programs import one_program
 
 
 class Factors(eqx.Module):
@@ -69,6 +70,7 @@ class Factors(eqx.Module):
     wv: tuple | None = None
 
 
+@one_program
 def factor(problem: _hb.HBProblem, y: Array, omega, g: Array, ty: Array, tlam,
            single: bool = False) -> Factors:
     """Factorise ``[[J(y, omega), g], [ty^T, tlam]]`` (jittable).
@@ -146,6 +148,7 @@ def jacobian_solve(factors: Factors, r: Array) -> Array:
     return solve(factors, jnp.concatenate([r, jnp.zeros(1)]))[:-1]
 
 
+@one_program
 def solve(factors: Factors, rhs: Array) -> Array:
     """Solution ``(N + 1,)`` of the factorised bordered system for ``rhs`` ``(N + 1,)``
     (jittable)."""

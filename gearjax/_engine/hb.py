@@ -45,6 +45,7 @@ from jaxtyping import Array, Float
 
 from . import aft as _aft
 from .mesh_force import mesh_force, stiffness_series, transmission_error
+from .programs import one_program
 from .results import RESULTS
 from .static import static_deflection
 from .system import System
@@ -324,12 +325,14 @@ def residual_scale(problem: HBProblem, omega) -> Array:
             ) * problem.x_scale[None, :]
 
 
+@one_program
 def residual(problem: HBProblem, y: Array, omega) -> Array:
     """Scaled residual, flat ``(N,)``, of scaled unknowns ``y`` (flat ``(N,)``)."""
     X = y.reshape(problem.shape) * problem.x_scale
     return (physical_residual(problem, X, omega) / residual_scale(problem, omega)).reshape(-1)
 
 
+@one_program
 def jacobian(problem: HBProblem, y: Array, omega) -> Array:
     """Exact ``d residual / d y``, ``(N, N)``, assembled from per-mesh blocks.
 
@@ -401,6 +404,7 @@ class HBSolution(eqx.Module):
         return self.result == RESULTS.successful
 
 
+@one_program
 def linear_guess(problem: HBProblem, omega) -> Array:
     """Scaled solution of the linear, mean-stiffness equations at ``omega``, in contact.
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -89,6 +90,7 @@ class ModalResult:
         return out
 
 
+@eqx.filter_jit
 def mode_classes(system: System):
     """Classes of the modes of the mean-stiffness model, as :func:`modes` gives them
     (jittable and vmappable over the system's arrays, used by the Floquet verdict).

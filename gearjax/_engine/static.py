@@ -5,11 +5,13 @@
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax.numpy as jnp
 
 from .system import System
 
 
+@eqx.filter_jit
 def static_deflection(system: System):
     """Static coordinates ``x`` (rad or m) and mesh forces ``F`` (N) of a ``System``.
 

@@ -84,6 +84,7 @@ class VerdictBasis(eqx.Module):
     rigid: Array
 
 
+@eqx.filter_jit
 def verdict_basis(problem: HBProblem) -> VerdictBasis:
     """:class:`VerdictBasis` of ``problem`` (Cholesky and symmetric eigen-decompositions).
 

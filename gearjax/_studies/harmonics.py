@@ -51,6 +51,7 @@ from .._engine import hb as _hb
 from .._errors import bad_argument
 from .._engine.modal import mode_classes
 from .._engine.newton import newton_jit
+from .._engine.programs import one_program
 from .._engine.responses import mesh_responses
 from .._engine.system import System
 
@@ -350,10 +351,16 @@ def truncation_change(problem: _hb.HBProblem, wide: _hb.HBProblem, y, omega,
     if not bool(sol.converged):
         return math.inf
     X = jnp.asarray(np.asarray(y).reshape(C, n)) * problem.x_scale
-    a = np.asarray(mesh_responses(problem, X, omega, F_static).rms_force)
-    b = np.asarray(mesh_responses(wide, sol.X, omega, F_static).rms_force)
+    a = np.asarray(_rms_forces(problem, X, omega, F_static))
+    b = np.asarray(_rms_forces(wide, sol.X, omega, F_static))
     floor = RMS_FLOOR * max(float(np.max(b)), 1e-300)
     return float(np.max(np.abs(a - b) / np.maximum(b, floor)))
+
+
+@one_program
+def _rms_forces(problem: _hb.HBProblem, X, omega, F_static):
+    """The meshes' RMS alternating forces (N) of a solution, in one compiled program."""
+    return mesh_responses(problem, X, omega, F_static).rms_force
 
 
 class TruncationWarning(UserWarning):

@@ -1,0 +1,36 @@
+"""Functions compiled as one program each.
+
+An operation called outside a trace is a compiled program of its own, traced, lowered
+and loaded from the compilation cache in every process; a function called several times
+inside one trace is traced each time. :func:`one_program` makes a function one program,
+traced once per argument shapes (and, inside another trace, once however often it is
+called there).
+"""
+
+from __future__ import annotations
+
+import functools
+import numbers
+
+import equinox as eqx
+import jax.numpy as jnp
+
+
+def one_program(fun):
+    """``fun`` compiled as one program (``equinox.filter_jit``), with its arguments that
+    are real numbers (Python or NumPy scalars, not ``bool``) passed as float arrays:
+    under ``filter_jit`` a number is static, one compilation per value. Other
+    arguments as ``filter_jit`` takes them (arrays traced, the rest static)."""
+    jitted = eqx.filter_jit(fun)
+
+    @functools.wraps(fun)
+    def call(*args, **kwargs):
+        return jitted(*map(_value, args), **{k: _value(v) for k, v in kwargs.items()})
+
+    return call
+
+
+def _value(arg):
+    if isinstance(arg, numbers.Real) and not isinstance(arg, bool):
+        return jnp.asarray(arg, dtype=float)
+    return arg
