@@ -12,11 +12,11 @@ from __future__ import annotations
 
 import dataclasses
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .programs import one_program
 from .system import System
 
 REPEATED_RTOL = 1e-6
@@ -90,7 +90,7 @@ class ModalResult:
         return out
 
 
-@eqx.filter_jit
+@one_program
 def mode_classes(system: System):
     """Classes of the modes of the mean-stiffness model, as :func:`modes` gives them
     (jittable and vmappable over the system's arrays, used by the Floquet verdict).

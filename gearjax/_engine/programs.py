@@ -31,6 +31,7 @@ def one_program(fun):
 
 
 def _value(arg):
+    """A real number as a float array; anything else as it is."""
     if isinstance(arg, numbers.Real) and not isinstance(arg, bool):
         return jnp.asarray(arg, dtype=float)
     return arg

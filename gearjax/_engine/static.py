@@ -5,13 +5,13 @@
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax.numpy as jnp
 
+from .programs import one_program
 from .system import System
 
 
-@eqx.filter_jit
+@one_program
 def static_deflection(system: System):
     """Static coordinates ``x`` (rad or m) and mesh forces ``F`` (N) of a ``System``.
 

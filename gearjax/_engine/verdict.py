@@ -16,6 +16,7 @@ from jaxtyping import Array, Bool, Complex, Float
 from .floquet import ScaledFrame, floquet_steps, monodromy_scaled, return_turns, scaled_frame
 from .hb import HBProblem
 from .modal import mode_classes
+from .programs import one_program
 
 __all__ = ["Stability", "stability", "VerdictBasis", "verdict_basis", "scaled_monodromy",
            "verdict", "bifurcation_kind", "floquet_steps"]
@@ -84,7 +85,7 @@ class VerdictBasis(eqx.Module):
     rigid: Array
 
 
-@eqx.filter_jit
+@one_program
 def verdict_basis(problem: HBProblem) -> VerdictBasis:
     """:class:`VerdictBasis` of ``problem`` (Cholesky and symmetric eigen-decompositions).
 
