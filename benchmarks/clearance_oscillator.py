@@ -30,15 +30,23 @@ def oscillator():
                                    f_mean=[0.1], f_cos=[[0.03]], f_sin=[[0.0]], forcing_mu=[1])
 
 
-def hb_sweep(K: int, T: int, repeats: int):
+def hb_sweep(K: int, T: int, repeats: int, own_jit: bool = True):
+    """The continuation from 0.5 to 1.5: ``own_jit``, the caller's ``jax.jit`` around
+    gearjax's solve and continuation (traced and lowered in every process); else
+    gearjax's compiled calls themselves (their programs kept between processes)."""
     problem = gj.hb_problem(oscillator(), gj.HarmonicBalance(n_harmonics=K, n_time=T))
     param = gj.FrequencyParameter(problem=problem, omega_ref=jnp.asarray(1.0))
     settings = gj.ContinuationSettings(step=0.05, max_step=0.3, max_dlambda=0.02)
 
-    @jax.jit
-    def run(omega0):
-        y0 = gj.solve_hb(problem, omega0).y
-        return gj.continue_compiled(param, y0, omega0, 1.5, settings, 400)
+    if own_jit:
+        @jax.jit
+        def run(omega0):
+            y0 = gj.solve_hb(problem, omega0).y
+            return gj.continue_compiled(param, y0, omega0, 1.5, settings, 400)
+    else:
+        def run(omega0):
+            y0 = gj.solve_hb_points(problem, jnp.asarray([omega0])).y[0]
+            return gj.continue_compiled(param, y0, omega0, 1.5, settings, 400)
 
     t0 = time.perf_counter()
     out = jax.block_until_ready(run(0.5))

@@ -7,7 +7,7 @@ Three runs of the same command, in fresh processes, in turn:
 2. ``first, cache on``: a fresh, empty cache directory (it fills it);
 3. ``second, cache on``: the same directory again (the daily user's second run).
 
-    python benchmarks/main_job.py [--full | --oscillator] [--rounds 1] [--keep DIR]
+    python benchmarks/main_job.py [--full | --oscillator [--own-jit]] [--rounds 1] [--keep DIR]
 
 The command is the README's first one, ``gearjax sweep --from 3290 --to 3450 --out
 sweep.nc --plot sweep.png`` (the bundled paper case, 0.05 mm backlash, through the fold
@@ -17,7 +17,10 @@ process spends outside the sweep (start, tracing, loading or compiling programs,
 writing the files). ``--oscillator``: instead, a Python process that imports gearjax
 and runs the clearance-oscillator continuation of ``benchmarks/clearance_oscillator.py``
 (K = 15, 0.5 -> 1.5; its first call, then one more), the whole process timed (pyHarm's
-sweep of the same oscillator takes about 1.3 s). ``--rounds N`` repeats the three runs
+sweep of the same oscillator takes about 1.3 s): gearjax's compiled calls
+(``solve_hb_points``, ``continue_compiled``, kept between processes), or with
+``--own-jit`` the same inside the caller's own ``jax.jit`` (traced in every process).
+``--rounds N`` repeats the three runs
 N times, interleaved.
 """
 
@@ -38,16 +41,18 @@ OSCILLATOR = """
 import sys, time
 sys.path.insert(0, {here!r})
 import clearance_oscillator as c
-r = c.hb_sweep(15, 256, 1)  # its first call (compiling or loaded from the cache), then one more
+r = c.hb_sweep(15, 256, 1, own_jit={own_jit})  # its first call (compiling or loaded), then one more
 print(r["points"], r["compile_s"])
 """
 
 
-def run_oscillator(cache: str) -> tuple[float, dict]:
+def run_oscillator(cache: str, own_jit: bool = False) -> tuple[float, dict]:
     """One Python process running the clearance-oscillator continuation: ``(wall
-    seconds, {"seconds": its call's time, "points": [...]})``."""
+    seconds, {"seconds": its call's time, "points": [...]})``; ``own_jit``: inside the
+    caller's own ``jax.jit`` (traced in every process), else gearjax's compiled calls."""
     env = {**os.environ, "GEARJAX_CACHE_DIR": cache}
-    code = OSCILLATOR.format(here=str(pathlib.Path(__file__).resolve().parent))
+    code = OSCILLATOR.format(here=str(pathlib.Path(__file__).resolve().parent),
+                             own_jit=own_jit)
     t = time.perf_counter()
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                           text=True, check=False)
@@ -79,6 +84,8 @@ def main() -> None:
     ap.add_argument("--full", action="store_true", help="the whole 2-15 kHz band")
     ap.add_argument("--oscillator", action="store_true",
                     help="the clearance-oscillator continuation in a fresh process")
+    ap.add_argument("--own-jit", action="store_true",
+                    help="the oscillator's calls inside the caller's own jax.jit")
     ap.add_argument("--rounds", type=int, default=1)
     ap.add_argument("--keep", help="cache directory to use (default: a fresh temporary one)")
     args = ap.parse_args()
@@ -90,12 +97,13 @@ def main() -> None:
             cache = args.keep or str(workdir / f"cache{k}")
             for name, where in (("cold, cache off", "0"), ("first, cache on", cache),
                                 ("second, cache on", cache)):
-                wall, out = (run_oscillator(where) if args.oscillator
+                wall, out = (run_oscillator(where, args.own_jit) if args.oscillator
                              else run(band, where, workdir))
                 rows.append((k + 1, name, wall, float(out.get("seconds", float("nan"))),
                              len(out.get("points", [])), out.get("folds_hz", [])))
                 print(f"round {k + 1}, {name}: {wall:.1f} s", flush=True)
-    what = ("clearance oscillator, K = 15, 0.5 -> 1.5 (the call: its 'sweep s')"
+    what = (f"clearance oscillator, K = 15, 0.5 -> 1.5, "
+            f"{'own jit' if args.own_jit else 'gearjax calls'} (the call: its 'sweep s')"
             if args.oscillator else
             f"gearjax sweep --from {band[0]} --to {band[1]} (paper case, 0.05 mm backlash)")
     print(f"\n== {what}, whole processes, {os.cpu_count()} CPUs")

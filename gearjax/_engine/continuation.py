@@ -30,6 +30,7 @@ from jaxtyping import Array
 from . import bordered as _bordered
 from . import corrector as _corrector
 from . import hb as _hb
+from .kept import kept_program
 from .results import RESULTS
 
 
@@ -432,7 +433,8 @@ def continue_compiled(param: AbstractParameter, y0, lam0, lam_end, settings: Set
     **Returns:** ``(ys (max_points, N), lams, folds, fold_lams, n_points, result)``;
     rows past ``n_points`` are padding; ``result`` as :attr:`Branch.result`. Suited to
     small systems (the clearance oscillator benchmark), where per-step Python overhead
-    would dominate.
+    would dominate. Compiled (``settings`` and ``max_points`` static); called outside a
+    trace, its program is kept between processes (:mod:`~gearjax._engine.kept`).
     """
     direction = jnp.sign(lam_end - lam0)
     state = start(param, y0, lam0, direction, settings)
@@ -561,5 +563,6 @@ class Trace:
         return bool(np.any(near))
 
 
-_arclength_step_jit = jax.jit(arclength_step, static_argnums=(2,))
-start_jit = jax.jit(start, static_argnums=(4,))
+continue_compiled = kept_program(continue_compiled, static_argnums=(4, 5))
+_arclength_step_jit = kept_program(arclength_step, static_argnums=(2,))
+start_jit = kept_program(start, static_argnums=(4,))

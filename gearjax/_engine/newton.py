@@ -29,6 +29,7 @@ import optimistix as optx
 from jaxtyping import Array
 
 from . import hb as _hb
+from .kept import kept_program
 from .linear_solver import CondensedLU, HBJacobian
 from .results import RESULTS
 
@@ -150,7 +151,7 @@ def newton(problem: _hb.HBProblem, omega, y0: Array) -> _hb.HBSolution:
     return _iterate(problem, jnp.asarray(omega, dtype=float), y0, chord=False)
 
 
-_newton_compiled = jax.jit(newton)
+_newton_compiled = kept_program(newton)
 
 
 def newton_jit(problem: _hb.HBProblem, omega, y0: Array) -> _hb.HBSolution:

@@ -69,6 +69,7 @@ from .initial_state import (  # where an integration starts; importable from her
     start_state as start_state,
 )
 from .integrator import Integrator
+from .kept import kept_program
 from .mesh_force import mesh_force, stiffness_series, transmission_error
 from .results import RESULTS
 from .static import static_deflection
@@ -475,7 +476,7 @@ def _arrays(*values):
     return tuple(None if v is None else jnp.asarray(v, dtype=float) for v in values)
 
 
-@eqx.filter_jit
+@kept_program(filtered=True)
 def _simulate(system, omega, x0, v0, settings):
     return _steady_state(integration_problem(system), omega, x0, v0, settings)
 

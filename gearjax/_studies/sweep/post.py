@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..._engine.kept import kept_program
 from ..._engine.responses import mesh_responses
 from ..._engine.results import RESULTS, result_word
 from ..._engine.verdict import (
@@ -180,7 +181,7 @@ def bifurcations(f_hz, stable, multipliers, excluded, branch=None, torus: bool =
     return out
 
 
-@jax.jit
+@kept_program
 def batch_monodromy(problem, basis, Xs, omegas, F_static):
     """Mesh responses and scaled monodromy matrices of a chunk of solutions."""
     resp = jax.vmap(mesh_responses, in_axes=(None, 0, 0, None))(problem, Xs, omegas, F_static)
@@ -189,7 +190,7 @@ def batch_monodromy(problem, basis, Xs, omegas, F_static):
     return resp, Phi
 
 
-@jax.jit
+@kept_program
 def batch_verdict(problem, basis, mu, V):
     """Stability verdicts of a chunk from its multipliers and Floquet modes."""
     return jax.vmap(verdict, in_axes=(None, None, 0, 0))(problem, basis, mu, V)

@@ -16,6 +16,7 @@ from ..._engine import continuation as _continuation
 from ..._engine import hb as _hb
 from ..._engine import time_domain as _time_domain
 from ..._engine.floquet import return_turns
+from ..._engine.kept import kept_program
 from ..._engine.newton import newton_jit, solve_hb, solve_linear
 from ..._engine.results import RESULTS
 
@@ -202,11 +203,11 @@ def solve_points(problem, omegas):
     return _linear_points(problem, omegas)
 
 
-@jax.jit
+@kept_program
 def _newton_points(problem, omegas):
     return jax.lax.map(lambda w: solve_hb(problem, w), omegas)
 
 
-@jax.jit
+@kept_program
 def _linear_points(problem, omegas):
     return jax.lax.map(lambda w: solve_linear(problem, w), omegas)

@@ -28,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._engine import continuation as _continuation
+from ..._engine.kept import kept_program
 from ..._engine.results import RESULTS, result_from_word, result_word
 from . import starts as _starts
 from .refine import refine_linear
@@ -363,7 +364,7 @@ def resumed_state(param, have, settings, direction) -> _continuation.ArcState:
         factors=factors, age=jnp.asarray(age), own=jnp.asarray(own))
 
 
-@functools.partial(jax.jit, static_argnames="single")
+@kept_program(static_argnames="single")
 def _factor(param, y, lam, ty, tlam, single):
     return param.factor(y, lam, ty, tlam, single)
 
