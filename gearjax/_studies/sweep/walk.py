@@ -20,7 +20,6 @@ balance cannot resolve such impacts, :func:`~gearjax._studies.sweep.dataset.poin
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 
 import jax
