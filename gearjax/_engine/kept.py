@@ -20,7 +20,9 @@ does not serve: it runs as an ordinary ``jax.jit`` program, as does every call i
 trace (``jit``, ``vmap``, ``grad``), a program that cannot be exported (host callbacks,
 outputs that are not arrays) and every call while the cache or the store is off
 (:data:`KEEP_ENV`). The store holds at most :data:`STORE_MAX_BYTES`; a file that cannot
-be read is exported again.
+be read is exported again. The key sees gearjax's source as it is on disk, not module
+globals changed at run time: code that patches what a program traces (a test's
+``monkeypatch`` of a solver constant) switches the store off first.
 """
 
 from __future__ import annotations
