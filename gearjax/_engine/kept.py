@@ -140,6 +140,7 @@ class _Kept:
             return self(args, kwargs)
 
         call.jitted, call.kept, call._cache_size = self.jitted, self, self.cache_size
+        call.lower = self.jitted.lower  # ahead-of-time, as jax.jit's: the traced program
         return call
 
     def cache_size(self) -> int:
