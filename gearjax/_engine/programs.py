@@ -38,3 +38,9 @@ def _value(arg):
     if isinstance(arg, numbers.Real) and not isinstance(arg, bool):
         return jnp.asarray(arg, dtype=float)
     return arg
+
+
+def float_arrays(*values):
+    """Each of ``values`` as a float array, ``None`` kept: a Python number would be
+    static under ``filter_jit`` (one compilation per value)."""
+    return tuple(None if v is None else jnp.asarray(v, dtype=float) for v in values)

@@ -71,6 +71,7 @@ from .initial_state import (  # where an integration starts; importable from her
 from .integrator import Integrator
 from .kept import kept_program
 from .mesh_force import mesh_force, stiffness_series, transmission_error
+from .programs import float_arrays
 from .results import RESULTS
 from .static import static_deflection
 from .system import System
@@ -296,7 +297,7 @@ def sample_trajectory(system: System, omega, x0, v0, tau, settings: TimeDomain =
     (rad or m, and per s) and whether the solver reached the last phase."""
     tau = np.asarray(tau, dtype=float)
     periods = max(1, math.ceil(float(tau[-1]) / (2 * math.pi)))
-    return _sample_trajectory(system, *_arrays(omega, x0, v0, tau), settings, periods)
+    return _sample_trajectory(system, *float_arrays(omega, x0, v0, tau), settings, periods)
 
 
 @eqx.filter_jit
@@ -456,7 +457,7 @@ def simulate(system: System, omega, *, x0=None, v0=None,
     require_periodic(system, "simulate")
     _positive(omega, "simulate")
     # both start arrays given: one compiled program whatever the caller passes
-    return _simulate(system, *_arrays(omega, *start_state(system, x0, v0)), settings)
+    return _simulate(system, *float_arrays(omega, *start_state(system, x0, v0)), settings)
 
 
 def _positive(omega, caller: str) -> None:
@@ -469,11 +470,6 @@ def _positive(omega, caller: str) -> None:
     if bad.size:
         raise ValueError(f"{caller}: the base frequency omega must be positive (rad/s), not "
                          f"{float(bad[0])!r}")
-
-
-def _arrays(*values):
-    """Python numbers would be static under ``filter_jit`` (one compilation per value)."""
-    return tuple(None if v is None else jnp.asarray(v, dtype=float) for v in values)
 
 
 @kept_program(filtered=True)
@@ -498,7 +494,7 @@ def simulate_points(system: System, omegas, *, x0=None, v0=None,
     """
     require_periodic(system, "simulate_points")
     _positive(omegas, "simulate_points")
-    return _simulate_points(system, *_arrays(omegas, x0, v0), settings, batch_size)
+    return _simulate_points(system, *float_arrays(omegas, x0, v0), settings, batch_size)
 
 
 def compile_simulate_points(system: System, omegas, *, x0=None, v0=None,
@@ -512,7 +508,7 @@ def compile_simulate_points(system: System, omegas, *, x0=None, v0=None,
     **Returns:** the compiled program (``jax.stages.Compiled``).
     """
     require_periodic(system, "compile_simulate_points")
-    return _simulate_points.lower(system, *_arrays(omegas, x0, v0), settings,
+    return _simulate_points.lower(system, *float_arrays(omegas, x0, v0), settings,
                                   batch_size).compile()
 
 
@@ -550,7 +546,7 @@ def simulate_sweep(system: System, omegas, *, x0=None, v0=None,
     """
     require_periodic(system, "simulate_sweep")
     _positive(omegas, "simulate_sweep")
-    return _simulate_sweep(system, *_arrays(omegas, x0, v0), settings)
+    return _simulate_sweep(system, *float_arrays(omegas, x0, v0), settings)
 
 
 @eqx.filter_jit

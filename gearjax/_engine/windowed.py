@@ -60,6 +60,7 @@ from jaxtyping import Array, Float, Int
 
 from .._config import require_x64
 from .integrator import Integrator
+from .programs import float_arrays
 from .responses import MeshResponses, responses_from_samples, static_mesh_forces
 from .results import RESULTS
 from .system import System
@@ -339,11 +340,6 @@ def _checked_plan(system: System, settings: Windowed) -> WindowPlan:
     return plan
 
 
-def _arrays(*values):
-    """Python numbers would be static under ``filter_jit`` (one compilation per value)."""
-    return tuple(None if v is None else jnp.asarray(v, dtype=float) for v in values)
-
-
 def simulate_windowed(system: System, omega, *, x0=None, v0=None,
                       settings: Windowed = Windowed()) -> WindowedResponse:
     """Integrate ``system`` at base frequency ``omega`` in windows until their statistics
@@ -366,7 +362,7 @@ def simulate_windowed(system: System, omega, *, x0=None, v0=None,
     quasi-periodic system.
     """
     plan = _checked_plan(system, settings)
-    return _simulate_windowed(system, *_arrays(omega, x0, v0), settings, plan)
+    return _simulate_windowed(system, *float_arrays(omega, x0, v0), settings, plan)
 
 
 @eqx.filter_jit
@@ -390,7 +386,7 @@ def simulate_windowed_points(system: System, omegas, *, x0=None, v0=None,
     **Raises:** as :func:`simulate_windowed`.
     """
     plan = _checked_plan(system, settings)
-    return _simulate_windowed_points(system, *_arrays(omegas, x0, v0), settings, plan,
+    return _simulate_windowed_points(system, *float_arrays(omegas, x0, v0), settings, plan,
                                      batch_size)
 
 
