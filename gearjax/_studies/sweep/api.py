@@ -147,8 +147,8 @@ def sweep(
                   to_hz=to_hz, mu_ref=case.mu_ref, max_step_hz=max_step_hz,
                   max_points=max_points, max_detour=max_detour, runaway=runaway)
     try:
-        segments, truncation = _segments.checked_segments(ctx, segments, F_static,
-                                                          fixed=harmonics is not None)
+        segments, truncation, start = _segments.checked_segments(
+            ctx, segments, F_static, fixed=harmonics is not None)
     except BaseException:
         log.close()
         raise
@@ -162,7 +162,7 @@ def sweep(
     post = PostStream(F_static)
     pieces, branches = _run_walk(ctx, walk, log, post, linear=linear, points=points,
                                  progress=with_branches(progress), F_static=F_static,
-                                 complete=complete, seeds=seeds)
+                                 complete=complete, seeds=seeds, start=start)
     if linear:
         solver["refinement"] = {"tolerance": LINEAR_TOLERANCE, "checked": walk.checked,
                                 "added": walk.added}
@@ -185,13 +185,15 @@ def sweep(
 
 
 def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress,
-              F_static, complete: bool = False, seeds: int = 0):
+              F_static, complete: bool = False, seeds: int = 0, start=None):
     """Walk every segment (a linear grid, or the continuations with the last segment
-    speculated), then, where ``complete``, the branches the walk missed
-    (:func:`~gearjax._studies.sweep.completion.complete`); the journal is closed after,
-    and the post-processing stopped where the walk is interrupted. **Returns:**
-    ``(pieces, branch records)`` of the completion, ``(None, None)`` without it. BLAS keeps a core for the post-processing while a continuation
-    runs (:func:`gearjax._studies.concurrency.limit_blas`)."""
+    speculated; the first from ``start`` ``(y, result, lambda)``, the point the
+    truncation check solved there, where given), then, where ``complete``, the branches
+    the walk missed (:func:`~gearjax._studies.sweep.completion.complete`); the journal
+    is closed after, and the post-processing stopped where the walk is interrupted.
+    **Returns:** ``(pieces, branch records)`` of the completion, ``(None, None)``
+    without it. BLAS keeps a core for the post-processing while a continuation runs
+    (:func:`gearjax._studies.concurrency.limit_blas`)."""
     last = walk.segments[-1]
     blas = None if linear else concurrency.limit_blas()  # a linear sweep's post comes after
     spec = None
@@ -200,6 +202,8 @@ def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress,
             _walk.linear_segments(ctx, walk, log, points, progress, F_static)
         while not linear and len(walk.problems) < len(walk.segments):
             entered, spec = _speculation.speculate(ctx, walk, log, post, spec, last)
+            if not walk.problems and entered is None:
+                entered = start
             if not _walk.walk_segment(ctx, walk, log, post, progress=progress,
                                       entered=entered):
                 break

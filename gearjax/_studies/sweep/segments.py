@@ -12,7 +12,7 @@ import numpy as np
 
 from ..._engine import hb as _hb
 from .. import harmonics as _harmonics
-from .starts import newton, resize_harmonics
+from .starts import newton, resize_harmonics, settled_start
 
 
 def band_segments(from_hz, to_hz, mu_ref, min_k, eta, fixed, cutoff_hz, system=None):
@@ -49,9 +49,12 @@ def band_segments(from_hz, to_hz, mu_ref, min_k, eta, fixed, cutoff_hz, system=N
 
 
 def checked_segments(ctx, segments, F_static, *, fixed: bool):
-    """The segments with K checked a posteriori, and the estimates ``[{"from_hz", "K",
-    "change", "K_check", "backlash"}]`` (``backlash``: whether the checked point had it;
-    ``skipped`` instead where the check was not affordable).
+    """``(segments, estimates, start)``: the segments with K checked a posteriori, the
+    estimates ``[{"from_hz", "K", "change", "K_check", "backlash"}]`` (``backlash``:
+    whether the checked point had it; ``skipped`` instead where the check was not
+    affordable), and the walk's start ``(y, result, lambda)`` at the band's first
+    frequency with the first segment's K where the check solved it on the sweep's own
+    problem (else None: the walk finds its start, ``starts.enter_segment``).
 
     At each segment's first frequency the point is solved with K and with 2K
     (:func:`gearjax._studies.harmonics.truncation_change`); where the relative change of a
@@ -65,8 +68,8 @@ def checked_segments(ctx, segments, F_static, *, fixed: bool):
     with another K is refused where the walk reaches it
     (:meth:`gearjax._studies.sweep.record.SweepLog.require_K`)."""
     target = _harmonics.TRUNCATION_TARGET
-    out, estimates = [], []
-    for f_a, f_b, K in segments:
+    out, estimates, start = [], [], None
+    for i, (f_a, f_b, K) in enumerate(segments):
         angles = range(len(K)) if isinstance(K, tuple) else (0,)
         solved = {}  # K -> the point at f_a (one solve serves every angle's check)
         previous = None  # the K checked before, whose point starts a grown K's
@@ -84,7 +87,8 @@ def checked_segments(ctx, segments, F_static, *, fixed: bool):
                         f"{_harmonics.orders_text(K)}: truncation{where} not checked ({skip})"))
                     continue
                 if K not in solved:
-                    solved[K] = checked_point(ctx, K, f_a, solved.get(previous))
+                    solved[K] = checked_point(ctx, K, f_a, solved.get(previous),
+                                              first=i == 0)
                 previous = K
                 change, backlash = truncation_at(ctx, K, f_a, F_static, K2, solved[K])
                 estimates.append({"from_hz": float(f_a), "K": orders_json(K),
@@ -112,7 +116,11 @@ def checked_segments(ctx, segments, F_static, *, fixed: bool):
             for g in grow:  # affordable: the check above solved it
                 K = _harmonics.widened(K, g)
         out.append((f_a, f_b, K))
-    return out, estimates
+        if i == 0 and K in solved and solved[K][0] is ctx.problem(K):
+            sol = solved[K][1]
+            if bool(sol.converged):
+                start = (sol.y, sol.result, ctx.lam(f_a))
+    return out, estimates, start
 
 
 def orders_json(K):
@@ -120,14 +128,17 @@ def orders_json(K):
     return list(K) if isinstance(K, tuple) else int(K)
 
 
-def checked_point(ctx, K, f_hz, previous=None):
+def checked_point(ctx, K, f_hz, previous=None, *, first=False):
     """``(problem, solution, with backlash)``: the point at ``f_hz`` (Hz) with the
     sweep's problem of ``K``. From ``previous`` (the converged point of smaller orders
     at ``f_hz``, a result of this function) where given: Newton from its unknowns padded
     with zeros, on the same system. Else, or where that fails, Newton from the linear
-    guess; where that fails with backlash (tooth separation far from contact), the point
-    of the system without backlash (a check from it judges the time-varying stiffness
-    only, and says so: ``False``)."""
+    guess; where that fails with backlash (tooth separation far from contact), at the
+    band's ``first`` frequency (where the walk starts, and starts from this point) Newton
+    from the orbit a time integration settles to, as the walk's start
+    (:func:`~gearjax._studies.sweep.starts.settled_start`); where that fails too, or at
+    a later segment's start, the point of the system without backlash (a check from it
+    judges the time-varying stiffness only, and says so: ``False``)."""
     omega = ctx.omega(f_hz)
     problem = ctx.problem(K)
     if previous is not None and bool(previous[1].converged):
@@ -139,6 +150,10 @@ def checked_point(ctx, K, f_hz, previous=None):
             return problem, sol, backlash
         problem = ctx.problem(K)
     sol = newton(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
+    if not bool(sol.converged) and problem.system.has_backlash and first:
+        sol = settled_start(problem, omega)
+        if bool(sol.converged):
+            return problem, sol, True
     if not bool(sol.converged) and problem.system.has_backlash:
         problem = ctx.problem(K, backlash=False)
         sol = newton(problem, jnp.asarray(omega), _hb.linear_guess(problem, omega))
