@@ -21,14 +21,15 @@ CACHE_MAX_BYTES = 2 * 1024**3
 
 def cache_dir() -> str | None:
     """The compilation cache directory gearjax sets up (``None``: switched off, or JAX's
-    own setting is kept)."""
+    own setting is kept). The same before and after :func:`_enable_cache` gives it to
+    JAX: a JAX setting that is the default directory is gearjax's own."""
     value = os.environ.get(CACHE_ENV)
     if value is not None:
         return None if value.strip() in ("", "0") else os.path.expanduser(value)
-    if jax.config.jax_compilation_cache_dir:
-        return None
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return os.path.join(base, "gearjax", "jax")
+    default = os.path.join(base, "gearjax", "jax")
+    own = jax.config.jax_compilation_cache_dir
+    return None if own and own != default else default
 
 
 def _enable_cache() -> None:

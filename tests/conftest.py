@@ -1,6 +1,11 @@
 import os
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# Programs are not kept between processes in the suite (tests/engine/test_kept.py and
+# tests/studies/test_config.py turn the store on where they test it): tests patch module
+# globals that programs trace, and the store, keyed by gearjax's source on disk, would
+# keep a program traced under a patch for every later run that shares the cache.
+os.environ.setdefault("GEARJAX_KEEP_PROGRAMS", "0")
 
 import jax  # noqa: E402
 import pytest  # noqa: E402

@@ -42,15 +42,28 @@ def run_probe(**env):
     return out.stdout.strip()
 
 
+KEPT_PROBE = CACHE_PROBE + (
+    "from gearjax._engine import kept\n"
+    "from gearjax._engine.mesh_force import backlash\n"
+    "print(kept.store_dir())\n"
+    "kept.kept_program(backlash)(jax.numpy.arange(3.0), jax.numpy.ones(3))\n"
+)
+
+
 def test_compiled_programs_are_kept_in_the_user_cache(tmp_path):
+    """By default (no setting at all) the cache and the store of kept programs are in
+    the user's cache directory, and a run writes both there."""
     env = {k: v for k, v in os.environ.items()
-           if k not in ("GEARJAX_CACHE_DIR", "JAX_COMPILATION_CACHE_DIR")}
+           if k not in ("GEARJAX_CACHE_DIR", "JAX_COMPILATION_CACHE_DIR",
+                        "GEARJAX_KEEP_PROGRAMS")}
     env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
-    out = subprocess.run([sys.executable, "-W", "ignore", "-c", CACHE_PROBE],
+    out = subprocess.run([sys.executable, "-W", "ignore", "-c", KEPT_PROBE],
                          capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
     cache = tmp_path / "xdg" / "gearjax" / "jax"
-    assert out.returncode == 0 and out.stdout.strip() == str(cache)
-    assert any(cache.iterdir())  # the program was written for the next run
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == [str(cache), str(cache / "programs")]
+    assert any(f.is_file() for f in cache.iterdir())  # the compiled programs, for the next run
+    assert len(list((cache / "programs").glob("*.bin"))) == 1  # the kept program
     assert sorted(p.name for p in tmp_path.iterdir()) == ["xdg"]  # nothing in the cwd
 
 
