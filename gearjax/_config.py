@@ -21,8 +21,9 @@ CACHE_MAX_BYTES = 2 * 1024**3
 
 def cache_dir() -> str | None:
     """The compilation cache directory gearjax sets up (``None``: switched off, or JAX's
-    own setting is kept). The same before and after :func:`_enable_cache` gives it to
-    JAX: a JAX setting that is the default directory is gearjax's own."""
+    own setting is kept). The answer does not change once :func:`_enable_cache` has
+    given the directory to JAX: a JAX setting equal to the default directory is
+    gearjax's own, not the user's."""
     value = os.environ.get(CACHE_ENV)
     if value is not None:
         return None if value.strip() in ("", "0") else os.path.expanduser(value)
