@@ -82,11 +82,13 @@ KEEP_ENV = "GEARJAX_KEEP_PROGRAMS"
 
 def store_dir() -> pathlib.Path | None:
     """Where exported programs are kept: ``programs/`` in the compilation cache directory
-    (``None`` where the cache is off, or the store is, :data:`KEEP_ENV`)."""
+    (``None`` where the cache is off, or its directory could not be made (a read-only
+    home: every process would export each program and fail to save it), or the store
+    is off, :data:`KEEP_ENV`)."""
     if os.environ.get(KEEP_ENV, "1").strip() in ("", "0"):
         return None
     root = _config.cache_dir()
-    return None if root is None else pathlib.Path(root) / "programs"
+    return None if root is None or not os.path.isdir(root) else pathlib.Path(root) / "programs"
 
 
 def kept_program(fun=None, *, static_argnums=(), static_argnames=(), filtered=False):

@@ -67,6 +67,22 @@ def test_compiled_programs_are_kept_in_the_user_cache(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["xdg"]  # nothing in the cwd
 
 
+def test_no_cache_and_no_store_where_the_cache_directory_cannot_be_made(tmp_path):
+    """A cache home that cannot hold a directory (here a file; a read-only home alike):
+    the run goes on without the cache, and without the store (which would export every
+    program in every process and fail to save it)."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("GEARJAX_CACHE_DIR", "JAX_COMPILATION_CACHE_DIR",
+                        "GEARJAX_KEEP_PROGRAMS")}
+    (tmp_path / "xdg").write_text("not a directory")
+    env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
+    out = subprocess.run([sys.executable, "-W", "ignore", "-c", KEPT_PROBE],
+                         capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["None", "None"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["xdg"]
+
+
 def test_cache_moved_or_switched_off(tmp_path):
     assert run_probe(GEARJAX_CACHE_DIR=str(tmp_path / "c")) == str(tmp_path / "c")
     assert any((tmp_path / "c").iterdir())
