@@ -1,11 +1,14 @@
 """The README's main job from the command line, cold and warm (issue 30's targets): wall
 time of whole ``gearjax`` processes, interpreter start included.
 
-Three runs of the same command, in fresh processes, in turn:
+Four runs of the same command, in turn:
 
 1. ``cold, cache off``: ``GEARJAX_CACHE_DIR=0`` (nothing compiled is kept);
 2. ``first, cache on``: a fresh, empty cache directory (it fills it);
-3. ``second, cache on``: the same directory again (the daily user's second run).
+3. ``second, cache on``: the same directory again (the daily user's second run);
+4. ``after compile``: the same directory, one process running the command twice (the
+   CLI's ``main``); its second call, timed in the process, is the run with nothing left
+   to trace, lower or load: the floor a second process can approach.
 
     python benchmarks/main_job.py [--full | --oscillator [--own-jit]] [--rounds 1] [--keep DIR]
 
@@ -14,14 +17,16 @@ sweep.nc --plot sweep.png`` (the bundled paper case, 0.05 mm backlash, through t
 pair at 3.32 kHz); ``--full`` runs the paper's whole band, 2-15 kHz, instead. Each run's
 JSON summary gives the sweep's own time (``seconds``), so the table shows what the
 process spends outside the sweep (start, tracing, loading or compiling programs,
-writing the files). ``--oscillator``: instead, a Python process that imports gearjax
-and runs the clearance-oscillator continuation of ``benchmarks/clearance_oscillator.py``
-(K = 15, 0.5 -> 1.5; its first call, then one more), the whole process timed (pyHarm's
-sweep of the same oscillator takes about 1.3 s): gearjax's compiled calls
-(``solve_hb_points``, ``continue_compiled``, kept between processes), or with
-``--own-jit`` the same inside the caller's own ``jax.jit`` (traced in every process).
-``--rounds N`` repeats the three runs
-N times, interleaved.
+writing the files), and the sweep's ``phase_seconds``, where its time went (assembly,
+truncation check, walk, completion, results).
+
+``--oscillator``: instead of the four, the first three runs of a Python process that
+imports gearjax and runs the clearance-oscillator continuation of
+``benchmarks/clearance_oscillator.py`` (K = 15, 0.5 -> 1.5; its first call, then one
+more), the whole process timed (pyHarm's sweep of the same oscillator takes about
+1.3 s): gearjax's compiled calls (``solve_hb_points``, ``continue_compiled``, kept
+between processes), or with ``--own-jit`` the same inside the caller's own ``jax.jit``
+(traced in every process). ``--rounds N`` repeats the runs N times, interleaved.
 """
 
 from __future__ import annotations
@@ -79,6 +84,39 @@ def run(band, cache: str, workdir: pathlib.Path) -> tuple[float, dict]:
     return wall, json.loads(proc.stdout)
 
 
+AFTER_COMPILE = """
+import contextlib, io, json, sys, time
+from gearjax._cli import main
+for k in range(2):  # the first call traces, loads or compiles; the second finds it all
+    out = io.StringIO()
+    t = time.perf_counter()
+    with contextlib.redirect_stdout(out):
+        code = main({argv!r})
+    wall = time.perf_counter() - t
+    if code != 0:
+        sys.exit(code)
+print(json.dumps({{"wall": wall, "summary": json.loads(out.getvalue())}}))
+"""
+
+
+def run_after_compile(band, cache: str, workdir: pathlib.Path) -> tuple[float, dict]:
+    """The command twice in one process: ``(wall seconds of the second call, its JSON
+    summary)``."""
+    argv = ["sweep", "--from", band[0], "--to", band[1], "--out", str(workdir / "sweep.nc"),
+            "--plot", str(workdir / "sweep.png"), "--json"]
+    proc = subprocess.run([sys.executable, "-c", AFTER_COMPILE.format(argv=argv)],
+                          env={**os.environ, "GEARJAX_CACHE_DIR": cache},
+                          capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        raise SystemExit(f"main_job.py: the after-compile run exited {proc.returncode}:\n"
+                         f"{proc.stderr[-2000:]}")
+    out = json.loads(proc.stdout.splitlines()[-1])
+    return out["wall"], out["summary"]
+
+
+PHASES = ("gear", "check", "walk", "completion", "results")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--full", action="store_true", help="the whole 2-15 kHz band")
@@ -95,12 +133,16 @@ def main() -> None:
         workdir = pathlib.Path(tmp)
         for k in range(args.rounds):
             cache = args.keep or str(workdir / f"cache{k}")
-            for name, where in (("cold, cache off", "0"), ("first, cache on", cache),
-                                ("second, cache on", cache)):
+            runs = [("cold, cache off", "0"), ("first, cache on", cache),
+                    ("second, cache on", cache)]
+            for name, where in runs + ([] if args.oscillator else
+                                       [("after compile", cache)]):
                 wall, out = (run_oscillator(where, args.own_jit) if args.oscillator
-                             else run(band, where, workdir))
+                             else run_after_compile(band, where, workdir)
+                             if name == "after compile" else run(band, where, workdir))
                 rows.append((k + 1, name, wall, float(out.get("seconds", float("nan"))),
-                             len(out.get("points", [])), out.get("folds_hz", [])))
+                             len(out.get("points", [])), out.get("folds_hz", []),
+                             out.get("phase_seconds", {})))
                 print(f"round {k + 1}, {name}: {wall:.1f} s", flush=True)
     what = (f"clearance oscillator, K = 15, 0.5 -> 1.5, "
             f"{'own jit' if args.own_jit else 'gearjax calls'} (the call: its 'sweep s')"
@@ -108,10 +150,15 @@ def main() -> None:
             f"gearjax sweep --from {band[0]} --to {band[1]} (paper case, 0.05 mm backlash)")
     print(f"\n== {what}, whole processes, {os.cpu_count()} CPUs")
     print(f"{'round':>5} {'run':<18} {'wall s':>7} {'sweep s':>8} {'outside s':>10} "
-          f"{'points':>7}")
-    for k, name, wall, sweep_s, points, _ in rows:
+          f"{'points':>7}" + ("" if args.oscillator else
+                              "   " + " ".join(f"{p:>10}" for p in PHASES)))
+    for k, name, wall, sweep_s, points, _, phases in rows:
         print(f"{k:>5} {name:<18} {wall:>7.1f} {sweep_s:>8.1f} {wall - sweep_s:>10.1f} "
-              f"{points:>7}")
+              f"{points:>7}" + ("" if args.oscillator else "   " + " ".join(
+                  f"{phases[p]:>10.1f}" if p in phases else f"{'-':>10}" for p in PHASES)))
+    if not args.oscillator:
+        print("(after compile: the command's second call in one process, timed there: no "
+              "interpreter start or imports; phases: the sweep's phase_seconds)")
     if not args.oscillator:
         folds = rows[-1][5]
         print(f"folds (Hz): {', '.join(f'{f:.0f}' for f in folds) if folds else 'none'}")

@@ -71,6 +71,7 @@ def test_linear_sweep_json_and_files(capsys, tmp_path, paper_train_h1, paper_tom
                  "--harmonics", "16", "--json", "--out", str(nc), "--plot", str(fig)])
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and out["stop"] == "reached_end" and len(out["points"]) == 3
+    assert list(out["phase_seconds"]) == ["gear", "check", "walk", "results"]  # no completion
     p = out["points"][0]
     assert {"mesh_frequency_hz", "stage_mesh_frequency_hz", "input_rpm", "result", "converged",
             "stable", "meshes"} <= set(p)
@@ -113,6 +114,10 @@ def test_nonlinear_sweep_keeps_mean_load_and_reports_stability(paper_train_h1):
     assert r.stop == "reached_end" and ds.sizes["point"] >= 8
     assert np.all(ds["converged"].values) and set(np.unique(ds["stable"].values)) <= {0, 1}
     assert "bifurcations" in _sweep.summary_json(r)
+    # where the time went, phase by phase in the order run, adding up to the whole
+    assert list(r.phase_seconds) == ["gear", "check", "walk", "completion", "results"]
+    assert all(t >= 0 for t in r.phase_seconds.values())
+    assert sum(r.phase_seconds.values()) == pytest.approx(r.seconds, abs=0.05)
     assert np.all(ds["back_contact"].values == 0.0)
     for stage in ("1", "2"):
         for side in ("sun", "ring"):

@@ -110,6 +110,7 @@ def sweep(
     journal that cannot be resumed.
     """
     t_start = time.perf_counter()
+    phases = Phases()
     check_arguments(from_hz, to_hz, eta=eta, smoothing=smoothing, harmonics=harmonics,
                     max_step_hz=max_step_hz, points=points, max_points=max_points,
                     seeds=seeds)
@@ -138,6 +139,7 @@ def sweep(
     runaway = _walk.RUNAWAY * (np.abs(np.asarray(F_static)) / np.asarray(system.kbar)
                                + np.asarray(system.backlash))  # RMS mesh deflection limit (m)
     train_toml = dumps_train(train)
+    phases.end("gear")
     run = run_fields(train_toml, gear=case.gear.name, stage=case.stage, from_hz=from_hz,
                      to_hz=to_hz, linear=linear, harmonics=harmonics, eta=eta,
                      max_step_hz=max_step_hz, smoothing=smoothing, points=points,
@@ -152,6 +154,7 @@ def sweep(
     except BaseException:
         log.close()
         raise
+    phases.end("check")
     solver = {"method": "harmonic balance", "linear": linear, "eta": eta,
               "segments": [[a, b, _segments.orders_json(K)] for a, b, K in segments],
               "reference_stage": case.stage,
@@ -162,7 +165,8 @@ def sweep(
     post = PostStream(F_static)
     pieces, branches = _run_walk(ctx, walk, log, post, linear=linear, points=points,
                                  progress=with_branches(progress), F_static=F_static,
-                                 complete=complete, seeds=seeds, start=start)
+                                 complete=complete, seeds=seeds, start=start,
+                                 phases=phases)
     if linear:
         solver["refinement"] = {"tolerance": LINEAR_TOLERANCE, "checked": walk.checked,
                                 "added": walk.added}
@@ -179,21 +183,41 @@ def sweep(
                               restarts=walk.restarts,
                               command="" if command is None else command,
                               branches=branches)
+    phases.end("results")
     return SweepResult(dataset=ds, folds_hz=tuple(folds), stop=walk.stop,
                        segments=tuple(walk.segments), seconds=time.perf_counter() - t_start,
-                       restarts=tuple(walk.restarts), branches=tuple(branches or ()))
+                       restarts=tuple(walk.restarts), branches=tuple(branches or ()),
+                       phase_seconds=dict(phases))
+
+
+class Phases(dict):
+    """Wall seconds per phase of a sweep, in the order run (``SweepResult.phase_seconds``):
+    :meth:`end` closes the phase running since the last call (or since creation)."""
+
+    def __init__(self):
+        super().__init__()
+        self._since = time.perf_counter()
+
+    def end(self, name: str) -> None:
+        now = time.perf_counter()
+        self[name] = self.get(name, 0.0) + now - self._since
+        self._since = now
 
 
 def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress,
-              F_static, complete: bool = False, seeds: int = 0, start=None):
+              F_static, complete: bool = False, seeds: int = 0, start=None,
+              phases: Phases | None = None):
     """Walk every segment (a linear grid, or the continuations with the last segment
     speculated; the first from ``start`` ``(y, result, lambda)``, the point the
     truncation check solved there, where given), then, where ``complete``, the branches
     the walk missed (:func:`~gearjax._studies.sweep.completion.complete`); the journal
-    is closed after, and the post-processing stopped where the walk is interrupted.
+    is closed after, and the post-processing stopped where the walk is interrupted;
+    ``phases`` (default: a new one) gets the end of the ``walk`` and of the
+    ``completion``.
     **Returns:** ``(pieces, branch records)`` of the completion, ``(None, None)``
     without it. BLAS keeps a core for the post-processing while a continuation runs
     (:func:`gearjax._studies.concurrency.limit_blas`)."""
+    phases = Phases() if phases is None else phases
     last = walk.segments[-1]
     blas = None if linear else concurrency.limit_blas()  # a linear sweep's post comes after
     spec = None
@@ -210,9 +234,12 @@ def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress,
         if spec is not None:
             spec.cancel()
             spec = None
+        phases.end("walk")
         if complete and walk.problems:
-            return _completion.complete(ctx, walk, log, post, F_static, seeds=seeds,
+            done = _completion.complete(ctx, walk, log, post, F_static, seeds=seeds,
                                         progress=progress)
+            phases.end("completion")
+            return done
         return None, None
     except BaseException:
         post.close()

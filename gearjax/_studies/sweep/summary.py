@@ -18,7 +18,11 @@ class SweepResult:
     ``segments`` (``(from_hz, to_hz, K)`` in sweep order), ``seconds``, ``restarts``
     (``{"from_hz", "at_hz", "reason"}``: where a branch was left and the next begun),
     ``branches`` (a completed sweep's ``{"branch", "found", "seed_hz", "stops", "eta"}``,
-    and a doubled branch's origin, :mod:`~gearjax._studies.sweep.completion`)."""
+    and a doubled branch's origin, :mod:`~gearjax._studies.sweep.completion`),
+    ``phase_seconds`` (wall seconds of each phase run, in order: ``gear`` (arguments,
+    assembly, harmonics plan), ``check`` (truncation check and the first point),
+    ``walk``, ``completion`` (where run), ``results`` (the post-processing's wait,
+    the dataset); they add up to ``seconds``)."""
 
     dataset: object
     folds_hz: tuple[float, ...]
@@ -27,6 +31,7 @@ class SweepResult:
     seconds: float
     restarts: tuple[dict, ...] = ()
     branches: tuple[dict, ...] = ()
+    phase_seconds: dict = dataclasses.field(default_factory=dict)
 
 
 def summary_json(result: SweepResult) -> dict:
@@ -45,6 +50,7 @@ def summary_json(result: SweepResult) -> dict:
         "restarts": list(result.restarts),
         "segments": [list(s) for s in result.segments],
         "seconds": result.seconds,
+        "phase_seconds": dict(result.phase_seconds),
         "points": points_json(ds),
         "solver": json.loads(ds.attrs.get("solver", "{}")),
     }
