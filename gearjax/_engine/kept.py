@@ -43,6 +43,7 @@ import sys
 import tempfile
 import threading
 import types
+import weakref
 
 import equinox as eqx
 import jax
@@ -118,6 +119,36 @@ class _Entry:
     out_tree: object = None
 
 
+class _Commit:
+    """Arguments of an exported program, each committed to the device it is on.
+
+    An exported program's outputs are committed to their device (a plain ``jax.jit``'s,
+    from uncommitted arguments, are not), and ``jax.jit`` keeps a program apart for
+    committed and uncommitted arguments of the same shapes: a program fed both by another
+    kept program's outputs and by fresh arrays would be compiled twice (seconds, in a
+    first run) and lowered twice in every run. Committing an array to its own device
+    moves no data; each uncommitted array is committed once, remembered by identity while
+    it lives (a problem's arrays enter every step of a continuation)."""
+
+    def __init__(self):
+        self.done: dict = {}  # id -> (weak reference to the array, its committed alias)
+
+    def __call__(self, leaves):
+        return [x if x.committed else self.one(x) for x in leaves]
+
+    def one(self, x):
+        key = id(x)
+        hit = self.done.get(key)
+        if hit is not None and hit[0]() is x:
+            return hit[1]
+        alias = jax.device_put(x, x.sharding)
+        self.done[key] = (weakref.ref(x, lambda _, k=key: self.done.pop(k, None)), alias)
+        return alias
+
+
+_commit = _Commit()
+
+
 class _Kept:
     """The state of one :func:`kept_program`: its jitted form and its programs in memory,
     by argument signature."""
@@ -170,7 +201,7 @@ class _Kept:
                     entry = self.entries[key] = self.entry(leaves, rebuild, static)
         if entry.call is None:
             return self.jitted(*args, **kwargs)
-        return jax.tree_util.tree_unflatten(entry.out_tree, entry.call(*leaves))
+        return jax.tree_util.tree_unflatten(entry.out_tree, entry.call(*_commit(leaves)))
 
     def split(self, args, kwargs):
         """``(array leaves, rebuild, static)``: the traced leaves of the arguments, a

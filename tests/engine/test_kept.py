@@ -98,6 +98,22 @@ def test_a_static_value_is_part_of_the_key(store):
     assert len(stored(store) - before) == 3
 
 
+def test_committed_or_fresh_arguments_one_compiled_program(store):
+    """A kept program's outputs are committed to their device (jax.export's call), fresh
+    arrays are not, and jax.jit compiles apart for each: fed both (here Newton from a
+    guess that is another kept program's output, then from a fresh array), the program is
+    compiled once, and gives what it gives from either."""
+    problem, omega, _ = problem_and_guess()
+    guess = kept.kept_program(_hb.linear_guess)(problem, omega)
+    assert guess.committed  # the exported program's output
+    call = kept.kept_program(_newton.newton)
+    from_output = call(problem, omega, guess)
+    from_fresh = call(problem, omega, jnp.asarray(np.asarray(guess)))
+    np.testing.assert_array_equal(from_output.y, from_fresh.y)
+    (entry,) = call.kept.entries.values()
+    assert entry.call._cache_size() == 1
+
+
 def test_calls_in_a_trace_and_code_outside_gearjax_run_as_jit(store):
     problem, omega, y0 = problem_and_guess()
     call = kept.kept_program(_newton.newton)
