@@ -50,15 +50,21 @@ KEPT_PROBE = CACHE_PROBE + (
 )
 
 
-def test_compiled_programs_are_kept_in_the_user_cache(tmp_path):
-    """By default (no setting at all) the cache and the store of kept programs are in
-    the user's cache directory, and a run writes both there."""
+def run_kept_probe_unset(tmp_path):
+    """:data:`KEPT_PROBE` in ``tmp_path`` with no cache setting at all, the user's cache
+    home ``tmp_path / "xdg"``."""
     env = {k: v for k, v in os.environ.items()
            if k not in ("GEARJAX_CACHE_DIR", "JAX_COMPILATION_CACHE_DIR",
                         "GEARJAX_KEEP_PROGRAMS")}
     env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
-    out = subprocess.run([sys.executable, "-W", "ignore", "-c", KEPT_PROBE],
-                         capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
+    return subprocess.run([sys.executable, "-W", "ignore", "-c", KEPT_PROBE],
+                          capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
+
+
+def test_compiled_programs_are_kept_in_the_user_cache(tmp_path):
+    """By default (no setting at all) the cache and the store of kept programs are in
+    the user's cache directory, and a run writes both there."""
+    out = run_kept_probe_unset(tmp_path)
     cache = tmp_path / "xdg" / "gearjax" / "jax"
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == [str(cache), str(cache / "programs")]
@@ -71,13 +77,8 @@ def test_no_cache_and_no_store_where_the_cache_directory_cannot_be_made(tmp_path
     """A cache home that cannot hold a directory (here a file; a read-only home alike):
     the run goes on without the cache, and without the store (which would export every
     program in every process and fail to save it)."""
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("GEARJAX_CACHE_DIR", "JAX_COMPILATION_CACHE_DIR",
-                        "GEARJAX_KEEP_PROGRAMS")}
     (tmp_path / "xdg").write_text("not a directory")
-    env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
-    out = subprocess.run([sys.executable, "-W", "ignore", "-c", KEPT_PROBE],
-                         capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
+    out = run_kept_probe_unset(tmp_path)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["None", "None"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["xdg"]
