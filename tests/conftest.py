@@ -17,14 +17,55 @@ import matplotlib  # noqa: E402
 matplotlib.use("Agg")
 
 
+MAP_FRACTION = 0.5
+"""Share of the kernel's memory-mapping limit past which compiled programs are dropped."""
+
+
+def _mappings() -> tuple[int, int] | None:
+    """``(mappings this process holds, the kernel's limit)``; ``None`` where the system
+    does not say (not Linux)."""
+    try:
+        with open("/proc/sys/vm/max_map_count") as f:
+            limit = int(f.read())
+        with open("/proc/self/maps", "rb") as f:
+            held = sum(1 for _ in f)
+    except (OSError, ValueError):
+        return None
+    return held, limit
+
+
+_PATCHING_MODULES: set[str] = set()
+"""Test modules with a test that uses ``monkeypatch`` (filled at collection)."""
+
+
+def pytest_collection_modifyitems(items):
+    _PATCHING_MODULES.update(str(item.path) for item in items
+                             if "monkeypatch" in getattr(item, "fixturenames", ()))
+
+
 @pytest.fixture(autouse=True, scope="module")
-def _free_compiled_programs():
-    """Drop JAX's compiled programs after each test module. Every XLA:CPU program holds a
-    few hundred memory mappings (its kernels' code), and the whole suite in one process
-    compiles enough of them to reach the kernel's limit (``vm.max_map_count``, 65530 by
-    default): XLA then fails to compile ("Cannot allocate memory") or crashes."""
+def _free_compiled_programs(request):
+    """Drop JAX's compiled programs after a test module once the process holds more than
+    :data:`MAP_FRACTION` of the kernel's memory-mapping limit (``vm.max_map_count``,
+    65530 by default; after every module where the system does not say). Every XLA:CPU
+    program holds a few hundred mappings (its kernels' code), and the whole suite in one
+    process compiles enough of them to reach the limit: XLA then fails to compile
+    ("Cannot allocate memory") or crashes. Dropping them only then keeps the programs
+    that later modules share (the solver's programs for the same shapes, and the
+    thousands of one-operation programs of eager array code) instead of compiling them
+    again in every module.
+
+    A module that patches (``monkeypatch``) starts and ends with none kept: a patched
+    function or constant that a program traces must be traced again under the patch
+    (and tests that count traces see their own), and no program traced under a patch
+    may serve a later module."""
+    patching = str(request.node.path) in _PATCHING_MODULES
+    if patching:
+        jax.clear_caches()
     yield
-    jax.clear_caches()
+    maps = _mappings()
+    if patching or maps is None or maps[0] > MAP_FRACTION * maps[1]:
+        jax.clear_caches()
 
 
 @pytest.fixture(scope="module")

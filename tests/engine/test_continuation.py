@@ -6,7 +6,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-import scipy.integrate
 
 import gearjax as gj
 from gearjax._engine import aft as _aft
@@ -17,12 +16,9 @@ from gearjax._engine import hb as _hb
 from gearjax._engine import newton as _newton
 from gearjax._engine.results import RESULTS
 
+from clearance_oscillator import ivp_amplitude, oscillator
+
 K, T = 15, 256
-
-
-def oscillator():
-    return gj.system_from_matrices([[1.0]], [[0.1]], [[0.0]], [[1.0]], [1.0], backlash=[1.0],
-                                   f_mean=[0.1], f_cos=[[0.03]], f_sin=[[0.0]], forcing_mu=[1])
 
 
 @pytest.fixture(scope="module")
@@ -39,18 +35,6 @@ def branch():
     return {"lam": np.asarray(lams[:n]), "amp": (x.max(1) - x.min(1)) / 2, "code": code,
             "folds": C.distinct_folds(np.asarray(fold_lams[:n])[np.asarray(folds[:n])]),
             "problem": problem, "param": param, "settings": settings, "y0": y0}
-
-
-def ivp_amplitude(omega, z0, periods=80):
-    """Independent reference: integrate x'' + 0.1x' + g(x) = 0.1 + 0.03 cos(w t)."""
-    def rhs(t, z):
-        x, v = z
-        return [v, 0.1 + 0.03 * np.cos(omega * t) - 0.1 * v - (x - np.clip(x, -1, 1))]
-
-    P = 2 * np.pi / omega
-    sol = scipy.integrate.solve_ivp(rhs, (0, periods * P), z0, rtol=1e-10, atol=1e-12,
-                                    t_eval=np.linspace((periods - 1) * P, periods * P, 2001))
-    return (sol.y[0].max() - sol.y[0].min()) / 2
 
 
 def test_reaches_the_end_through_both_folds(branch):

@@ -47,6 +47,7 @@ def stable_states_at(ds, f_hz):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_stable_branches_hold_every_state_the_integration_sweeps_settle_to(completed,
                                                                            integrations):
     ds = completed.dataset

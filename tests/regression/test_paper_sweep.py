@@ -39,6 +39,7 @@ def backlash_sweep(paper_train):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_paper_backlash_sweep_keeps_points_folds_and_peaks(backlash_sweep):
     r = backlash_sweep
     ds = r.dataset

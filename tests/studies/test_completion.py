@@ -30,14 +30,10 @@ from gearjax._studies.sweep.dataset import point_data
 from gearjax._studies.sweep.post import PostStream
 from gearjax._studies.sweep.record import SweepLog
 
+from clearance_oscillator import ivp_amplitude, oscillator
+
 K = 15
 W = 0.75  # rad/s, inside the hysteresis band
-
-
-def oscillator():
-    return gj.system_from_matrices([[1.0]], [[0.1]], [[0.0]], [[1.0]], [1.0], backlash=[1.0],
-                                   f_mean=[0.1], f_cos=[[0.03]], f_sin=[[0.0]],
-                                   forcing_mu=[1])
 
 
 def hz(omega):
@@ -76,17 +72,6 @@ def stable_amplitudes_at(s, w):
             t = 0.0 if om[i + 1] == om[i] else (w - om[i]) / (om[i + 1] - om[i])
             out.append(amp[i] + t * (amp[i + 1] - amp[i]))
     return sorted(out)
-
-
-def ivp_amplitude(omega, z0, periods=80):
-    def rhs(t, z):
-        x, v = z
-        return [v, 0.1 + 0.03 * np.cos(omega * t) - 0.1 * v - (x - np.clip(x, -1, 1))]
-
-    P = 2 * np.pi / omega
-    sol = scipy.integrate.solve_ivp(rhs, (0, periods * P), z0, rtol=1e-10, atol=1e-12,
-                                    t_eval=np.linspace((periods - 1) * P, periods * P, 2001))
-    return (sol.y[0].max() - sol.y[0].min()) / 2
 
 
 @pytest.fixture(scope="module")

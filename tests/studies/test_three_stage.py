@@ -75,6 +75,7 @@ def test_three_stage_mesh_modes_reach_10_khz(capsys):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_sweep_raises_k_until_truncation_meets_target():
     train = gj.load_train(TRAIN)
     system = linear_system(train)

@@ -193,14 +193,27 @@ def resize_harmonics(y, K_old, problem):
     return jnp.asarray(new.reshape(-1))
 
 
+POINTS_CHUNK = 8
+"""Points per call of the compiled point solver: a batch of any size runs as chunks of
+this many (the last one padded with its own last frequency), a single point alone, so
+that one problem compiles two programs whatever the batch sizes a sweep or its
+refinement asks for."""
+
+
 def solve_points(problem, omegas):
     """Independent solutions at the base frequencies ``omegas`` ``(P,)`` (rad/s), from the
     linear guess: one factorisation each without backlash (``newton.solve_linear``), Newton
     with backlash; one point after the other (``lax.map``: a vmapped batch of dense
-    factorisations is slower on a CPU)."""
-    if problem.system.has_backlash:
-        return _newton_points(problem, omegas)
-    return _linear_points(problem, omegas)
+    factorisations is slower on a CPU). Returns an ``HBSolution`` batched over ``P``."""
+    solve = _newton_points if problem.system.has_backlash else _linear_points
+    omegas = jnp.asarray(omegas)
+    P = omegas.shape[0]
+    if P <= 1:
+        return solve(problem, omegas)
+    padded = jnp.concatenate([omegas, jnp.repeat(omegas[-1:], -P % POINTS_CHUNK)])
+    chunks = [solve(problem, padded[i:i + POINTS_CHUNK])
+              for i in range(0, padded.shape[0], POINTS_CHUNK)]
+    return jax.tree.map(lambda *parts: jnp.concatenate(parts)[:P], *chunks)
 
 
 @kept_program
