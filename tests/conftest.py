@@ -34,15 +34,6 @@ def _mappings() -> tuple[int, int] | None:
     return held, limit
 
 
-_PATCHING_MODULES: set[str] = set()
-"""Test modules with a test that uses ``monkeypatch`` (filled at collection)."""
-
-
-def pytest_collection_modifyitems(items):
-    _PATCHING_MODULES.update(str(item.path) for item in items
-                             if "monkeypatch" in getattr(item, "fixturenames", ()))
-
-
 @pytest.fixture(autouse=True, scope="module")
 def _free_compiled_programs(request):
     """Drop JAX's compiled programs after a test module once the process holds more than
@@ -55,16 +46,17 @@ def _free_compiled_programs(request):
     thousands of one-operation programs of eager array code) instead of compiling them
     again in every module.
 
-    A module that patches (``monkeypatch``) starts and ends with none kept: a patched
-    function or constant that a program traces must be traced again under the patch
-    (and tests that count traces see their own), and no program traced under a patch
-    may serve a later module."""
-    patching = str(request.node.path) in _PATCHING_MODULES
-    if patching:
+    A module marked ``fresh_programs`` starts and ends with none kept: it patches what a
+    program traces (a function or constant read while tracing must be traced again under
+    the patch, and no program traced under a patch may serve a later module) or counts
+    traces. A patch of Python-level work (the walk's steps, a file write, an
+    environment variable) needs no mark: no compiled program holds it."""
+    fresh = request.node.get_closest_marker("fresh_programs") is not None
+    if fresh:
         jax.clear_caches()
     yield
     maps = _mappings()
-    if patching or maps is None or maps[0] > MAP_FRACTION * maps[1]:
+    if fresh or maps is None or maps[0] > MAP_FRACTION * maps[1]:
         jax.clear_caches()
 
 

@@ -14,6 +14,8 @@ from gearjax._engine import hb as _hb
 from gearjax._engine import kept
 from gearjax._engine import newton as _newton
 
+pytestmark = pytest.mark.fresh_programs  # patches jax.export and the store's jitted
+
 
 def oscillator(clearance=0.5):
     return gj.system_from_matrices([[1.0]], [[0.1]], [[0.0]], [[1.0]], [1.0],

@@ -17,6 +17,8 @@ from gearjax._engine import newton as _newton
 from gearjax._engine import time_domain as td
 from gearjax._engine.results import RESULTS, result_word
 
+pytestmark = pytest.mark.fresh_programs  # counts the traces of ``_steady_state``
+
 solve_hb = jax.jit(_newton.solve_hb)
 
 

@@ -12,6 +12,8 @@ from gearjax._engine import windowed as wd
 from gearjax._engine.responses import responses_from_samples
 from gearjax._engine.results import RESULTS, result_word
 
+pytestmark = pytest.mark.fresh_programs  # counts the traces of ``_windows``
+
 SQRT2 = float(np.sqrt(2.0))
 
 
