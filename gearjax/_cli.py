@@ -44,6 +44,7 @@ from ._errors import (
     field_message,
     one_line,
 )
+from ._environment import check_environment
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_NOT_CONVERGED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 DEBUG_ENV = "GEARJAX_DEBUG"
@@ -88,6 +89,7 @@ def main(argv: list[str] | None = None) -> int:
                        f"{', '.join(_COMMANDS)} (gearjax --help describes them)")
     notes: list[str] = []
     try:
+        check_environment()
         _check_outputs(args)
         with warnings.catch_warnings():
             warnings.simplefilter("always", TrainWarning)
@@ -944,7 +946,8 @@ def _verify_cmd(args, train, notes) -> int:
               f"{ref['window_periods']} base periods, {ref['n_agree']} consecutive windows "
               f"agreeing within {ref['agreement_tolerance']:g}")
     kw, nw = (8, 14) if ref is not None else (3, 13)  # "(12, 10)", "quasi_periodic"
-    print(f"{'Hz':>9} {'K':>{kw}} {'HB':>10} {'NI':>{nw}} {'stable':>6} {'max rel diff':>12} "
+    print(f"{'Hz':>9} {'K':>{kw}} {'truncation':>10} {'HB':>10} {'NI':>{nw}} {'stable':>6} "
+          f"{'max rel diff':>12} "
           f"{'worst mesh':>10} {'RMS HB (N)':>10} {'RMS NI (N)':>10}")
     for k, p in enumerate(out["points"]):
         rel = result.rel_diff[k]
@@ -959,13 +962,23 @@ def _verify_cmd(args, train, notes) -> int:
         K = K if isinstance(K, int) else "(" + ", ".join(map(str, K)) + ")"
         flag = "" if p["ok"] else "  NOT OK" + (f" ({p['agreement']})" if "agreement" in p
                                                 else "")
-        print(f"{p['mesh_frequency_hz']:>9.1f} {K:>{kw}} {p['result_hb']:>10} "
+        print(f"{p['mesh_frequency_hz']:>9.1f} {K:>{kw}} {_last_estimate(p):>10} "
+              f"{p['result_hb']:>10} "
               f"{p['result_ni']:>{nw}} {stable:>6} " + tail + flag)
     if args.out:
         print(f"results written to {args.out}")
     if args.plot:
         print(f"figure written to {args.plot}")
     return code
+
+
+def _last_estimate(point: dict) -> str:
+    """The truncation estimate of a verified point's orders (the largest over the angles
+    of its last check), or ``-`` where none was made."""
+    K = point["truncation"][-1]["K"] if point["truncation"] else None
+    changes = [c["change"] for c in point["truncation"]
+               if c["K"] == K and c["change"] is not None]
+    return f"{max(changes):.1e}" if changes else "-"
 
 
 # ----------------------------------------------------------------------------- plot

@@ -95,7 +95,9 @@ def torus_basis(orders_max, grid, rates, truncation: str = "diamond") -> Basis:
             raise ValueError(f"grid[{g}] = {T} samples cannot carry {K} harmonics (need >= "
                              f"{2 * K + 2})")
     keep = []
-    for k in itertools.product(*(range(-K, K + 1) for K in Kmax)):
+    vectors = (itertools.product(*(range(-K, K + 1) for K in Kmax)) if truncation == "box"
+               else _diamond_vectors(Kmax))
+    for k in vectors:
         first = next((v for v in k if v), 0)
         if first <= 0:
             continue
@@ -105,6 +107,53 @@ def torus_basis(orders_max, grid, rates, truncation: str = "diamond") -> Basis:
     keep.sort()
     return Basis(orders=tuple(k for _, k in keep), grid=grid,
                  rates=tuple(float(r) for r in rates))
+
+
+def _diamond_vectors(Kmax: tuple):
+    """Every integer vector with ``sum_g |k_g| / K_g <= 1`` (zero included), in
+    ``itertools.product`` order: the prefixes past the budget are never extended, so the
+    cost grows with the set, not with the box ``prod (2 K_g + 1)`` around it."""
+    L = math.lcm(*Kmax)
+    weight = [L // K for K in Kmax]
+
+    def extend(prefix: tuple, budget: int):
+        g = len(prefix)
+        if g == len(Kmax):
+            yield prefix
+            return
+        reach = budget // weight[g]
+        for v in range(-reach, reach + 1):
+            yield from extend(prefix + (v,), budget - abs(v) * weight[g])
+
+    return extend((), L)
+
+
+def truncation_set_size(orders_max, truncation: str = "diamond") -> int:
+    """Coefficient rows ``2P + 1`` of the basis :func:`torus_basis` would build (``P``
+    wave vectors), counted in closed form or by a recursion over the budget left per
+    angle, without enumerating the set: for sizing a problem before it is built.
+
+    **Raises:** ``ValueError`` for a truncation not in :data:`TRUNCATIONS` or a
+    ``K_g < 1``."""
+    Kmax = tuple(int(k) for k in orders_max)
+    if truncation not in TRUNCATIONS:
+        raise ValueError(f"truncation = {truncation!r}: must be one of {TRUNCATIONS}")
+    if not Kmax or min(Kmax) < 1:
+        raise ValueError(f"orders_max {Kmax}: at least one harmonic per angle")
+    if truncation == "box":
+        return math.prod(2 * K + 1 for K in Kmax)
+    L = math.lcm(*Kmax)
+    weight = [L // K for K in Kmax]
+
+    @functools.cache
+    def points(g: int, budget: int) -> int:  # vectors of angles g.. within the budget
+        reach = budget // weight[g]
+        if g == len(Kmax) - 1:
+            return 2 * reach + 1
+        return points(g + 1, budget) + 2 * sum(points(g + 1, budget - v * weight[g])
+                                               for v in range(1, reach + 1))
+
+    return points(0, L)  # zero and each wave vector with its negative: 2P + 1
 
 
 # ------------------------------------------------------------------ index tables

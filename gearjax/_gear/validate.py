@@ -90,14 +90,28 @@ def geometry_warnings(train: Train) -> list[str]:
                 f"centre-distance mismatch of {gap:+.3g} mm at module {float(s.module_mm):g} mm; "
                 "data kept as given"
             )
-        for i, psi in enumerate(np.asarray(s.planet_angles_deg)):
-            q = (zs + zr) * psi / 360.0
-            if abs(q - round(q)) > 1e-6:
-                out.append(
-                    f"{where}: stage {s.id!r} planet {i + 1} at {psi:g} deg: assembly rule "
-                    f"(Z_s + Z_r) psi / 360 = {zs + zr}*{psi:g}/360 = {q:.4g} is not an integer"
-                )
+        off = [(i, psi, (zs + zr) * psi / 360.0)
+               for i, psi in enumerate(np.asarray(s.planet_angles_deg))
+               if abs((zs + zr) * psi / 360.0 - round((zs + zr) * psi / 360.0)) > 1e-6]
+        if len(off) == 1:
+            ((i, psi, q),) = off
+            out.append(
+                f"{where}: stage {s.id!r} planet {i + 1} at {psi:g} deg: assembly rule "
+                f"(Z_s + Z_r) psi / 360 = {zs + zr}*{psi:g}/360 = {q:.4g} is not an integer"
+            )
+        elif off:  # one line for the stage, however many planets
+            shown = ", ".join(f"{i + 1} at {psi:g} deg ({q:.4g})" for i, psi, q in off[:SHOWN])
+            more = f" and {len(off) - SHOWN} more" if len(off) > SHOWN else ""
+            out.append(
+                f"{where}: stage {s.id!r}: {len(off)} of {len(s.planet_angles_deg)} planets "
+                f"break the assembly rule (Z_s + Z_r) psi / 360 = {zs + zr} psi / 360 an "
+                f"integer: planets {shown}{more}"
+            )
     return out
+
+
+SHOWN = 4
+"""Planets named in a warning that many planets share (the rest are counted)."""
 
 
 def assembly_slots(stage) -> int:

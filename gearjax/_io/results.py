@@ -53,6 +53,7 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
+from .._errors import TrainError
 from .._version import __version__
 from .journal import sync_directory
 from .._engine.responses import RESPONSE_FIELDS, RESPONSE_UNITS, MeshResponses
@@ -334,7 +335,7 @@ def save_results(ds: xr.Dataset, path) -> pathlib.Path:
             f"{', '.join(SUFFIXES)} (NetCDF or CSV)")
     with atomic_path(path) as tmp:
         if suffix == ".nc":
-            ds.to_netcdf(tmp, engine="h5netcdf")
+            ds.to_netcdf(tmp, engine="h5netcdf", encoding=checksummed(ds))
         else:
             results_frame(ds).to_csv(tmp, index=False)
     return path
@@ -364,25 +365,53 @@ def atomic_path(path):
             tmp.unlink()
         except OSError:
             pass
-        if isinstance(e, OSError) and str(tmp) in (str(e.filename), str(e)):
-            # name the file the caller asked for, not the temporary one
-            if e.filename is not None:
-                raise OSError(e.errno, e.strerror, str(path)) from e
-            raise OSError(str(e).replace(str(tmp), str(path))) from e
+        if isinstance(e, OSError) and e.filename in (None, tmp, str(tmp)):
+            # name the file the caller asked for, not the temporary one (and name it
+            # where the writer did not: h5py's "No space left on device" names none)
+            reason = e.strerror or " ".join(str(e).replace(str(tmp), str(path)).split())
+            raise OSError(e.errno, reason, str(path)) from e
         raise
     sync_directory(path)
 
 
+def checksummed(ds: xr.Dataset) -> dict:
+    """The ``encoding`` argument of ``to_netcdf`` (h5netcdf) that writes every numeric
+    array of ``ds`` (one dimension or more) with HDF5's Fletcher-32 checksum, so that a
+    value changed after writing is refused when read (:func:`read_netcdf`)."""
+    return {name: {"fletcher32": True} for name, v in ds.variables.items()
+            if v.ndim >= 1 and v.dtype.kind in "biufcmM"}
+
+
+def read_netcdf(path, group: str | None = None) -> xr.Dataset:
+    """The Dataset of a NetCDF file (``group`` of it), loaded into memory.
+
+    **Raises:** ``FileNotFoundError`` where it does not exist; :class:`~gearjax.TrainError`
+    (one line naming the file) where it is not NetCDF, or is damaged (a checksum of
+    :func:`checksummed` does not match its values)."""
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"results file {str(path)!r} does not exist")
+    try:
+        return xr.load_dataset(path, group=group, engine="h5netcdf")
+    except Exception as e:  # noqa: BLE001  h5py, netCDF and xarray raise many kinds
+        reason = " ".join(str(e).split()) or type(e).__name__
+        if "filter returned failure" in reason:
+            raise TrainError(f"{path}: damaged: the checksum of a stored array does not "
+                             "match its values (the file changed after it was written); "
+                             "run the command that wrote it again") from None
+        raise TrainError(f"{path}: not a NetCDF results file ({reason[:120]})") from None
+
+
 def load_results(path) -> xr.Dataset:
-    """Read a NetCDF results file written by :func:`save_results` (loaded into memory)."""
+    """Read a NetCDF results file written by :func:`save_results` (loaded into memory).
+
+    **Raises:** ``ValueError`` for another suffix than ``.nc``; as :func:`read_netcdf`."""
     path = pathlib.Path(path)
     if path.suffix.lower() != ".nc":
         raise ValueError(
             f"results file {str(path)!r} has suffix {path.suffix!r}: only NetCDF (.nc) "
             "results can be read back")
-    if not path.is_file():
-        raise FileNotFoundError(f"results file {str(path)!r} does not exist")
-    return xr.load_dataset(path, engine="h5netcdf")
+    return read_netcdf(path)
 
 
 def results_frame(ds: xr.Dataset) -> pd.DataFrame:

@@ -10,6 +10,7 @@ import numpy as np
 import xarray as xr
 
 from .._version import __version__
+from .results import checksummed, read_netcdf
 
 
 def save_verify(result, path) -> pathlib.Path:
@@ -37,12 +38,14 @@ def save_verify(result, path) -> pathlib.Path:
                "gearjax_version": __version__})
     if getattr(result, "reference", None) is not None:  # a quasi-periodic gear's windows
         root.attrs["reference"] = json.dumps(result.reference)
-    root.to_netcdf(path, mode="w", engine="h5netcdf")
-    result.hb.to_netcdf(path, mode="a", group="hb", engine="h5netcdf")
-    result.ni.to_netcdf(path, mode="a", group="ni", engine="h5netcdf")
+    root.to_netcdf(path, mode="w", engine="h5netcdf", encoding=checksummed(root))
+    for group, ds in (("hb", result.hb), ("ni", result.ni)):
+        ds.to_netcdf(path, mode="a", group=group, engine="h5netcdf", encoding=checksummed(ds))
     return path
 
 
 def load_verify(path):
-    """``(root, hb, ni)`` Datasets of a file written by :func:`save_verify`."""
-    return tuple(xr.load_dataset(path, group=g, engine="h5netcdf") for g in (None, "hb", "ni"))
+    """``(root, hb, ni)`` Datasets of a file written by :func:`save_verify`.
+
+    **Raises:** as :func:`~gearjax._io.results.read_netcdf`."""
+    return tuple(read_netcdf(path, group=g) for g in (None, "hb", "ni"))

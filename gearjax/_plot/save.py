@@ -12,6 +12,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .._errors import TrainError, bad_argument
+from .._io.results import read_netcdf
 from .._io.verify_file import load_verify
 from .._engine.modal import ModalResult
 
@@ -286,18 +287,12 @@ def result_kind(ds) -> str | None:
 
 
 def _open_results(path: pathlib.Path):
-    import xarray as xr
-
     if not path.is_file():
         raise TrainError(f"{path}: no such results file")
     if path.suffix.lower() != ".nc":
         raise TrainError(f"{path}: only NetCDF results (.nc) can be redrawn; write them as "
                          "NetCDF (FILE.nc)")
-    try:
-        ds = xr.load_dataset(path, engine="h5netcdf")
-    except Exception as e:  # noqa: BLE001  h5py, netCDF and xarray raise many kinds
-        reason = " ".join(str(e).split()) or type(e).__name__
-        raise TrainError(f"{path}: not a NetCDF results file ({reason[:120]})") from None
+    ds = read_netcdf(path)
     if "gearjax_version" not in ds.attrs:
         raise TrainError(f"{path}: not a gearjax results file (no gearjax_version attribute)")
     return ds

@@ -39,14 +39,13 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 import time
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._engine import aft as _aft
+from .resources import available_memory
 from .._engine import hb as _hb
 from .._errors import bad_argument
 from .._engine.modal import mode_classes
@@ -218,7 +217,7 @@ def coefficient_count(system: System, K) -> int:
     K = as_orders(K)
     if isinstance(K, int):
         return 2 * K + 1
-    return torus_basis_of(system, K).n_coefficients
+    return _aft.truncation_set_size(K, TORUS_TRUNCATION)
 
 
 def factor_unknowns(system: System, K) -> int:
@@ -230,33 +229,30 @@ def factor_unknowns(system: System, K) -> int:
     return coefficient_count(system, K) * r + 1
 
 
+def grid_samples(system: System, K) -> int:
+    """Samples of the AFT grid at ``K``: ``T``, or the product ``T_1 ... T_G`` of the
+    angles' samples on a torus (``_hb.time_samples``), counted without building it."""
+    K = as_orders(K)
+    Ks = (K,) if isinstance(K, int) else K
+    return math.prod(_hb.time_samples(k, system, 1, g) for g, k in enumerate(Ks))
+
+
+def _grid_bytes(system: System, K) -> int:
+    """Memory of the arrays on the AFT grid: per mesh the stiffness, transmission error
+    and its rate, the deflection, the force and their tangents (eight doubles a sample),
+    and the sample's index along each angle."""
+    return 8 * grid_samples(system, K) * (8 * system.n_meshes + system.n_angles)
+
+
 def memory_bytes(system: System, K) -> int:
     """Estimated peak memory (bytes) of one Newton or continuation step at ``K``: the
     condensed matrix, its LU and the products that assemble it (about four copies of
-    ``N^2`` doubles), and the per-mesh Jacobian blocks with their projections
-    (``m C^2 (r + 2)`` doubles)."""
+    ``N^2`` doubles), the per-mesh Jacobian blocks with their projections
+    (``m C^2 (r + 2)`` doubles) and the arrays on the AFT grid (:func:`grid_samples`)."""
     N = factor_unknowns(system, K)
     C = coefficient_count(system, K)
     r = (N - 1) // C
-    return 8 * (4 * N * N + system.n_meshes * C * C * (r + 2))
-
-
-def available_memory() -> int:
-    """Bytes of memory available to a solve: the accelerator's free memory, else the
-    host's available memory (``MemAvailable``), else its physical memory."""
-    dev = jax.devices()[0]
-    if dev.platform != "cpu":
-        stats = dev.memory_stats() or {}
-        if "bytes_limit" in stats:
-            return int(stats["bytes_limit"] - stats.get("bytes_in_use", 0))
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    return 8 * (4 * N * N + system.n_meshes * C * C * (r + 2)) + _grid_bytes(system, K)
 
 
 @functools.cache
@@ -294,9 +290,11 @@ def require_size(system: System, K, *, argument: str = "harmonics", mu=None,
     N = factor_unknowns(system, K)
     mu_text = f"mu = {list(mu)}: " if mu is not None else ""
     kind = "periodic" if isinstance(as_orders(K), int) else "torus"
+    grid = (f" and an AFT grid of {grid_samples(system, K)} samples"
+            if 2 * _grid_bytes(system, K) > need else "")
     raise bad_argument(argument, orders_text(K) if value is None else value,
                        f"{mu_text}{orders_text(K)} harmonics make a factorisation of {N} "
-                       f"unknowns, about {_size(need)} of the {_size(avail)} available "
+                       f"unknowns{grid}, about {_size(need)} of the {_size(avail)} available "
                        f"(at most {MEMORY_SHARE:.0%}) and about "
                        f"{factor_seconds(system, K):.0f} s each: too large for the {kind} "
                        "harmonic balance; reduce stiffness_harmonics or the "

@@ -50,6 +50,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+import warnings
 from collections.abc import Callable, Sequence
 
 import jax
@@ -178,7 +179,10 @@ def verify_gear(
               "mode": "sweep" if is_sweep else "points"}
     common = {"command": "" if command is None else command, "mode": solver["mode"]}
     hb_ds = _hb_dataset(case, f_hz, hb, {"method": "harmonic balance",
-                                         "harmonics": harmonics, **solver}, t_hb, common)
+                                         "harmonics": harmonics, **solver,
+                                         "truncation_checks": hb["truncation"],
+                                         "truncation_target": _harmonics.TRUNCATION_TARGET},
+                        t_hb, common)
     hb_ds["harmonics"] = ("point", hb["harmonics"], {"units": "1",
                                                      "long_name": "solution harmonics K"})
     ni_ds = trajectory_dataset(case, f_hz, tr, {**solver_settings(settings), **solver},
@@ -215,7 +219,9 @@ def _verify_torus(case: GearCase, f_hz, is_sweep: bool, harmonics, tolerance: fl
     common = {"command": "" if command is None else command, "mode": solver["mode"]}
     hb_ds = _hb_dataset(case, f_hz, hb, {
         "method": "torus harmonic balance", "harmonics": harmonics,
-        "truncation": _harmonics.TORUS_TRUNCATION, "torus": torus_fields(case), **solver},
+        "truncation": _harmonics.TORUS_TRUNCATION, "torus": torus_fields(case), **solver,
+        "truncation_checks": hb["truncation"],
+        "truncation_target": _harmonics.TRUNCATION_TARGET},
         t_hb, common)
     hb_ds["harmonics"] = (("point", "angle"), hb["harmonics"], {
         "units": "1", "long_name": "orders K_g of the point's truncation set, per torus "
@@ -374,6 +380,13 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
                 if words[j] != converged and case.has_backlash:
                     sol = backlash_start(problem, omegas[i])
                     ys[i], result[i] = sol.y, result_word(sol.result)
+    truncation = [[] for _ in range(P)]
+    for i in range(P):
+        if result[i] == converged:
+            ks[i], ys[i], truncation[i] = checked_orders(case, problems, ks[i], ys[i],
+                                                         omegas[i], fixed=harmonics is not None)
+    groups = {K: np.array([i for i in range(P) if ks[i] == K]) for K in dict.fromkeys(ks)}
+    problems = {K: problems[K] for K in groups}
     torus = case.G > 1
     X = [None] * P if torus else np.zeros((P, 2 * max(ks) + 1, n))
     x0, v0 = np.zeros((P, n)), np.zeros((P, n))
@@ -396,7 +409,70 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
     responses = jax.tree.map(lambda a: np.where(failed[:, None], np.nan, a), responses)
     return {"X": X, "harmonics": np.array(ks, dtype=int), "result": result,
             "stable": np.where(failed, np.nan, stable), "responses": responses,
-            "x0": x0, "v0": v0}
+            "x0": x0, "v0": v0, "truncation": truncation}
+
+
+def checked_orders(case: GearCase, problems: dict, K, y, omega: float, *, fixed: bool):
+    """The a posteriori truncation check of a converged point, as a sweep makes it for a
+    segment (:func:`gearjax._studies.sweep.segments.checked_segments`): the point ``y``
+    (scaled unknowns at orders ``K``, base frequency ``omega`` rad/s) solved again with
+    each angle's order doubled (:func:`~gearjax._studies.harmonics.truncation_change`);
+    where an estimate exceeds ``TRUNCATION_TARGET`` that angle's order doubles (while the
+    check at twice it is affordable) and the point is solved again from its unknowns.
+    A ``fixed`` K (the caller's ``harmonics``) is checked, warned about
+    (:class:`~gearjax._studies.harmonics.TruncationWarning`) and kept. ``problems``
+    (K -> problem) gains the problems made.
+
+    **Returns:** ``(K, y, estimates)``: the orders kept, the point at them, and per check
+    a dict ``K``, ``K_check``, ``change`` (``None`` where not checked: ``skipped`` says
+    why, or the doubled solve did not converge)."""
+    system, target = case.system, _harmonics.TRUNCATION_TARGET
+
+    def problem(k):
+        if k not in problems:
+            problems[k] = _hb.hb_problem(system, _harmonics.settings_for(system, k))
+        return problems[k]
+
+    estimates = []
+    angles = range(len(K)) if isinstance(K, tuple) else (0,)
+    while True:
+        grow = []
+        for g in angles:
+            K2 = _harmonics.widened(K, g)
+            skip = _harmonics.check_affordable(system, K, g)
+            if skip is not None:
+                estimates.append({"K": _json_orders(K), "K_check": None, "change": None,
+                                  "skipped": skip})
+                continue
+            change = _harmonics.truncation_change(problem(K), problem(K2), y, omega,
+                                                  jnp.asarray(case.F_static))
+            finite = bool(np.isfinite(change))
+            estimates.append({"K": _json_orders(K), "K_check": _json_orders(K2),
+                              "change": float(change) if finite else None})
+            if finite and change > target:
+                if fixed:
+                    warnings.warn(_harmonics.TruncationWarning(
+                        f"verify: {omega / (2 * np.pi):.1f} Hz (base) with K = "
+                        f"{_harmonics.orders_text(K)}: truncation estimate {change:.2%} "
+                        f"(RMS mesh force change against K = {_harmonics.orders_text(K2)}; "
+                        f"target {target:.1%}): omit `harmonics` to let verify choose K"))
+                else:
+                    grow.append(g)
+        if not grow:
+            return K, y, estimates
+        wide = K
+        for g in grow:
+            wide = _harmonics.widened(wide, g)
+        sol = newton(problem(wide), jnp.asarray(omega), resize_harmonics(y, K, problem(wide)))
+        if not bool(sol.converged):
+            estimates.append({"K": _json_orders(wide), "K_check": None, "change": None,
+                              "skipped": "the point did not converge with the raised orders"})
+            return K, y, estimates
+        K, y = wide, sol.y
+
+
+def _json_orders(K):
+    return list(K) if isinstance(K, tuple) else int(K)
 
 
 # ------------------------------------------------------------------------------ JSON
@@ -404,8 +480,9 @@ def harmonic_balance_points(case: GearCase, f_hz, harmonics: int | None = None,
 
 def verify_json(result: VerifyResult) -> dict:
     """interface.md's ``verify`` JSON: ``points``, each with the point fields of a sweep
-    (``result`` and ``converged`` of both methods) and per mesh ``rms_hb``, ``rms_ni``,
-    ``rel_diff``, ``ok`` (``reason`` where a value is missing). A quasi-periodic gear
+    (``result`` and ``converged`` of both methods), ``truncation`` (the a posteriori
+    checks of the point's orders, :func:`checked_orders`) and per mesh ``rms_hb``,
+    ``rms_ni``, ``rel_diff``, ``ok`` (``reason`` where a value is missing). A quasi-periodic gear
     adds ``reference`` (:func:`window_reference`) and ``torus``
     (:func:`~gearjax._gear.case.torus_fields`), and per point ``harmonics`` as the
     orders per angle, ``period`` null with ``period_reason``, ``windows``, ``window_s``,
@@ -415,6 +492,7 @@ def verify_json(result: VerifyResult) -> dict:
     names = hb["mesh"].values.tolist()
     stage, side = hb["stage"].values.tolist(), hb["side"].values.tolist()
     planet = hb["planet"].values.tolist()
+    checks = json.loads(hb.attrs.get("solver", "{}")).get("truncation_checks", [])
     points = []
     for k in range(hb.sizes["point"]):
         res_hb, res_ni = str(hb["result"].values[k]), str(ni["result"].values[k])
@@ -446,6 +524,7 @@ def verify_json(result: VerifyResult) -> dict:
             "stable": None if stable < 0 else bool(stable),
             "period": int(ni["period"].values[k]) or None,  # 0: no repeat found
             "harmonics": None if torus else int(hb["harmonics"].values[k]),
+            "truncation": checks[k] if k < len(checks) else [],
             "ok": bool(np.all(result.ok[k])),
             "meshes": meshes,
         })

@@ -226,6 +226,35 @@ def test_plot_of_a_file_it_cannot_draw_exits_2(capsys, saved, tmp_path, name, wo
         assert w in line[0]
 
 
+@pytest.mark.parametrize("kind", ["sweep", "verify"])
+def test_a_value_changed_after_writing_is_refused_by_its_checksum(capsys, saved, tmp_path,
+                                                                   kind):
+    """One byte of a stored array flipped (the RMS forces of a sweep, of a verification's
+    harmonic balance): `plot` and `gj.load_results` refuse the file in one line instead
+    of drawing or returning a wrong value."""
+    import numpy as np
+    import xarray as xr
+
+    import gearjax as gj
+    from gearjax._io.verify_file import load_verify
+
+    path = saved[kind]
+    group = "hb" if kind == "verify" else None
+    values = xr.load_dataset(path, group=group, engine="h5netcdf")["rms_force"].values
+    data = bytearray(path.read_bytes())
+    at = data.find(np.ascontiguousarray(values).tobytes())
+    assert at > 0  # the array is stored as written (no compression)
+    data[at + 3] ^= 0xFF
+    damaged = tmp_path / f"damaged_{kind}.nc"
+    damaged.write_bytes(bytes(data))
+    code, out, err = run(capsys, "plot", str(damaged))
+    line = [l for l in err.splitlines() if l.startswith("gearjax: error:")]
+    assert code == 2 and out == "" and len(line) == 1 and "Traceback" not in err
+    assert f"{damaged}: damaged: the checksum of a stored array does not match" in line[0]
+    with pytest.raises(gj.TrainError, match="damaged: the checksum"):
+        load_verify(damaged) if kind == "verify" else gj.load_results(damaged)
+
+
 def test_verify_out_must_be_netcdf(capsys):
     code, out, err = run(capsys, "verify", "--at", "3000", "--out", "v.csv")
     assert code == 2 and "--out = 'v.csv': must end in .nc" in err

@@ -120,13 +120,44 @@ def test_output_paths_are_refused_before_any_work(capsys, tmp_path, no_work, arg
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.nc"]  # nothing left behind
 
 
+# ------------------------------------------------------- 2b. environment variables
+
+
+@pytest.mark.parametrize("argv", [["info"], ["modes"], SWEEP, ["plot", "results.nc"]])
+@pytest.mark.parametrize("name, value, words", [
+    ("GEARJAX_THREADS", "abc", "must be an integer >= 1"),
+    ("GEARJAX_THREADS", "0", "must be an integer >= 1"),
+    ("GEARJAX_KEEP_PROGRAMS", "yes", "must be 0 or 1"),
+    ("GEARJAX_DEBUG", "on", "must be 0 or 1"),
+    ("GEARJAX_THREAD", "2", "not a gearjax setting (gearjax reads GEARJAX_THREADS,"),
+])
+def test_environment_is_checked_before_any_work(capsys, monkeypatch, no_work, argv, name,
+                                                 value, words):
+    """Every command, whatever its work, refuses a bad or misspelt ``GEARJAX_*`` setting
+    at its start: exit 2, one line naming the variable, its value and the rule."""
+    monkeypatch.setenv(name, value)
+    code, out, err = run(capsys, *argv)
+    line = one_line(err)
+    assert code == 2 and out == ""
+    assert f"environment: {name} = {value!r}: " in line and words in line
+
+
+def test_a_cache_directory_that_is_a_file_is_refused(capsys, monkeypatch, no_work, tmp_path):
+    (tmp_path / "f").write_text("not a directory")
+    monkeypatch.setenv("GEARJAX_CACHE_DIR", str(tmp_path / "f"))
+    code, out, err = run(capsys, "info")
+    assert code == 2 and "environment: GEARJAX_CACHE_DIR = " in one_line(err)
+    assert "must be a directory" in one_line(err)
+
+
 def _dataset(n: int = 3) -> xr.Dataset:
     return xr.Dataset({"a": ("point", np.arange(float(n)), {"units": "1"})},
                       attrs={"gearjax_version": gj.__version__})
 
 
+@pytest.mark.parametrize("named", [True, False], ids=["named", "unnamed"])
 @pytest.mark.parametrize("suffix", [".nc", ".csv"])
-def test_results_are_written_atomically(tmp_path, monkeypatch, suffix):
+def test_results_are_written_atomically(tmp_path, monkeypatch, suffix, named):
     path = tmp_path / f"r{suffix}"
     monkeypatch.setattr(_results, "results_frame", lambda ds: ds.to_dataframe())
     _results.save_results(_dataset(3), path)
@@ -135,13 +166,17 @@ def test_results_are_written_atomically(tmp_path, monkeypatch, suffix):
     def torn(self, target, *a, **k):  # half a file, then the writer dies
         with open(target, "wb") as f:
             f.write(before[: len(before) // 2])
-        raise OSError(28, "No space left on device", str(target))
+        if named:
+            raise OSError(28, "No space left on device", str(target))
+        raise OSError(f"Can't write data (file write failed: errno = 28, error message = "
+                      "'No space left on device')")  # as h5py says it: no file named
 
     monkeypatch.setattr(xr.Dataset, "to_netcdf", torn)
     monkeypatch.setattr(pd.DataFrame, "to_csv", torn)
     with pytest.raises(OSError) as e:
         _results.save_results(_dataset(5), path)
     assert e.value.filename == str(path)  # the caller's path, not the temporary one
+    assert "No space left on device" in e.value.strerror
     assert path.read_bytes() == before  # the old file, whole
     assert [p.name for p in tmp_path.iterdir()] == [path.name]  # no temporary file left
 

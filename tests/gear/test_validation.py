@@ -321,15 +321,26 @@ def test_concentricity_warning_for_published_stage_one(paper_text):
 
 def test_assembly_warning(paper_text):
     # Stage 2: (44 + 80) * 100 / 360 = 34.44 and (44 + 80) * 200 / 360 = 68.89.
-    bad = mutate(paper_text, lambda r: r["stages"][1].update(planet_angles_deg=[0, 100, 200]))
+    bad = mutate(paper_text, lambda r: r["stages"][1].update(planet_angles_deg=[0, 100]))
     with pytest.warns(GeometryWarning) as record:
         train = gearjax.loads_train(bad, source=SOURCE)
-    assembly = [str(w.message) for w in record if "assembly" in str(w.message)]
-    assert len(assembly) == 2
-    assert "'2'" in assembly[0] and "planet 2" in assembly[0] and "100" in assembly[0]
-    assert "124" in assembly[0] and "34.44" in assembly[0]
-    assert "planet 3" in assembly[1] and "68.89" in assembly[1]
-    assert train.stages[1].n_planets == 3
+    (one,) = [str(w.message) for w in record if "assembly" in str(w.message)]
+    assert "'2'" in one and "planet 2 at 100 deg" in one and "124*100/360 = 34.44" in one
+    assert train.stages[1].n_planets == 2
+
+
+def test_planets_breaking_the_assembly_rule_make_one_line_per_stage(paper_text):
+    """Nine planets 40 deg apart on stage 2: eight break the rule (124 * 40 / 360 =
+    13.78): one warning for the stage, the count, the first planets with their numbers."""
+    nine = [40.0 * i for i in range(9)]
+    bad = mutate(paper_text, lambda r: r["stages"][1].update(planet_angles_deg=nine))
+    with pytest.warns(GeometryWarning) as record:
+        train = gearjax.loads_train(bad, source=SOURCE)
+    (one,) = [str(w.message) for w in record if "assembly" in str(w.message)]
+    assert one.startswith(f"{SOURCE}: stage '2': 8 of 9 planets break the assembly rule")
+    assert "planets 2 at 40 deg (13.78), 3 at 80 deg (27.56)" in one
+    assert one.endswith("and 4 more") and "\n" not in one
+    assert train.stages[1].n_planets == 9
 
 
 def test_bundled_example_keeps_published_teeth():

@@ -4,6 +4,7 @@ harmonics of a sweep are checked a posteriori (gearjax/_harmonics.py)."""
 import json
 import re
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -98,8 +99,49 @@ def test_memory_rule_refuses_with_mu_harmonics_and_memory(train, capsys, monkeyp
     # the same rule on every path, against the memory this machine has
     monkeypatch.setattr(_harmonics, "available_memory", lambda: 5 * 10**7)
     with pytest.raises(gj.TrainError, match=r"mu = \[7, 8\]: 48 harmonics make a factorisation "
-                                            r"of 971 unknowns, about 45 MB of the 50 MB"):
+                                            r"of 971 unknowns, about 46 MB of the 50 MB"):
         verify_gear(train, "first", [4000.0], linear=True)
+
+
+def eight_stage_train() -> str:
+    """Eight three-planet stages in series, every ring braked, teeth chosen so that no two
+    stage mesh frequencies share a base with multipliers <= 16: eight frequency groups."""
+    teeth = [(31, 20), (29, 16), (23, 19), (37, 17), (41, 19), (43, 17), (25, 17), (35, 19)]
+    ids = "ABCDEFGH"
+    out = ['name = "eight stages in series"', "stiffness_harmonics = 1"]
+    for i, (zs, zp) in enumerate(teeth):
+        out += ["[[stages]]", f'id = "{ids[i]}"',
+                f"teeth = {{ sun = {zs}, planet = {zp}, ring = {zs + 2 * zp} }}",
+                "module_mm = 2.0", "pressure_angle_deg = 20.0",
+                "planet_angles_deg = [0, 120, 240]", "contact_ratio = { sun = 1.6, ring = 1.8 }",
+                "mesh_stiffness = { sun = 3.0e8, ring = 3.5e8 }", "mesh_damping_ratio = 0.02",
+                "half_backlash = { sun = 5.0e-5, ring = 5.0e-5 }",
+                "inertia = { sun = 1.0e-3, ring = 1.0e-2, carrier = 4.0e-3, planet = 6.0e-5 }",
+                "planet_mass = 0.3"]
+    for a, b in zip(ids, ids[1:]):
+        out += ["[[couplings]]", f'members = ["{a}.carrier", "{b}.sun"]', "stiffness = 1.0e8"]
+    out += ["[housing]", "braked = 1.0e10", "free = 1.0e2", "[gears.low]", 'input = "A.sun"',
+            'output = "H.carrier"', "brakes = [" + ", ".join(f'"{c}.ring"' for c in ids) + "]",
+            "input_torque = 200.0"]
+    return "\n".join(out) + "\n"
+
+
+def test_eight_groups_are_refused_by_their_grid_before_it_is_built():
+    """Eight incommensurate groups at the floor orders (2 per angle): a factorisation of
+    4,641 unknowns would fit, but the AFT grid of 16 samples per angle holds 16^8 = 4.3e9
+    samples (tens of TB). The size rule counts the set and the grid without building
+    either and refuses in one line, instead of enumerating or allocating them (which ran
+    out of memory)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gj.TrainWarning)
+        train = gj.loads_train(eight_stage_train(), source="eight.toml")
+    assert gj.gear_frequency_groups(gj.kinematics(train, "low")).G == 8
+    t0 = time.perf_counter()
+    with pytest.raises(gj.TrainError, match=r"\(2, 2, 2, 2, 2, 2, 2, 2\) harmonics make a "
+                       r"factorisation of 4641 unknowns and an AFT grid of 4294967296 "
+                       r"samples, about \d+\.\d GB of the"):
+        _sweep.sweep(train, "low", 3000.0, 3050.0)
+    assert time.perf_counter() - t0 < 10.0
 
 
 @pytest.mark.slow

@@ -6,6 +6,7 @@ harmonic balance and integrator.
 """
 
 import json
+import pathlib
 
 import numpy as np
 import pytest
@@ -66,6 +67,8 @@ def test_verify_linear_paper_first_gear_within_1_percent(capsys, tmp_path):
     for p in out["points"]:
         assert p["result_hb"] == "converged" and p["result_ni"] == "converged"
         assert p["converged"] and p["ok"] and p["period"] == 1 and p["harmonics"] == 64
+        (check,) = p["truncation"]  # the first choice checked against K = 128, and kept
+        assert check["K"] == 64 and check["K_check"] == 128 and check["change"] < 0.005
         assert len(p["meshes"]) == 16
         for m in p["meshes"]:
             assert {"name", "rms_hb", "rms_ni", "rel_diff", "ok"} <= set(m)
@@ -140,3 +143,22 @@ def test_no_converged_point_exits_3(capsys, monkeypatch, simulated):
     out = json.loads(capsys.readouterr().out)  # valid JSON: no NaN
     m = out["points"][0]["meshes"][0]
     assert m["rms_force"] is None and m["reason"] == "point not converged (max_steps)"
+
+
+@pytest.mark.long
+@pytest.mark.slow
+def test_verify_raises_K_where_the_first_choice_is_short(capsys):
+    """tests/data/three_stage.toml at 1 kHz (stage-A mesh frequency), default settings:
+    the first choice K = 64 is 5% off in the RMS forces against K = 128, so verify
+    raises K as a sweep would, checks 128 against 256, and agrees with the independent
+    integration within 1% (at K = 64 it was 4.8% off). Long: three solves up to
+    K = 256 of a 3-stage train and the integration (about a minute on 2 cores)."""
+    train = pathlib.Path(__file__).parents[1] / "data" / "three_stage.toml"
+    code = main(["verify", str(train), "--at", "1000", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    (p,) = out["points"]
+    first, second = p["truncation"]
+    assert first["K"] == 64 and first["K_check"] == 128 and first["change"] > 0.005
+    assert second["K"] == 128 and second["K_check"] == 256 and second["change"] < 0.005
+    assert code == 0 and p["harmonics"] == 128 and out["all_ok"]
+    assert out["max_rel_diff"] < 0.01
