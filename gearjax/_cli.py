@@ -755,7 +755,7 @@ def _sweep_run(args, train, notes, journal) -> int:
                        linear=args.linear, harmonics=args.harmonics, eta=args.eta,
                        max_step_hz=args.max_step, points=args.points,
                        max_points=args.max_points, smoothing=args.smoothing,
-                       progress=bar, journal=journal, resume=args.resume,
+                       progress=bar, say=bar.note, journal=journal, resume=args.resume,
                        command=args.command_line, complete=args.complete,
                        seeds=args.seeds)
     ds = result.dataset

@@ -101,17 +101,22 @@ def test_printer_off_a_terminal_writes_a_line_per_25_points_also_where_it_jumps(
 @pytest.mark.parametrize("terminal", [False, True])
 def test_sweep_command_writes_only_the_final_progress_line_unless_on_a_terminal(
         capsys, monkeypatch, paper_toml_h1, json_flag, terminal):
-    """Off a terminal, and under --json also on one, stderr gets one progress line."""
+    """Off a terminal, and under --json also on one, stderr gets one progress line, after
+    the line announcing the truncation check (the step before the first point)."""
     stream = Terminal() if terminal else None
     if stream is not None:
         monkeypatch.setattr(sys, "stderr", stream)
     code = main(["sweep", str(paper_toml_h1), "--linear", "--from", "5000", "--to", "5400",
                  "--points", "3", "--harmonics", "16", *json_flag])
     err = stream.getvalue() if stream is not None else capsys.readouterr().err
+    check = "sweep: truncation check, segment 1 of 1 at 5000.0 Hz: K = 16 against 32"
     lines = [l for l in err.splitlines() if not l.startswith("warning: ")]
-    assert code == 0
+    assert code == 0 and check in err
     if terminal and not json_flag:
         assert "\rsweep   0%|" in err and "5000.0 Hz, 0 points" in err  # the bar drawn
         lines = [err.split("\r")[-1].strip()]  # then wiped for the final line
+    else:
+        assert lines[0] == check
+        lines = lines[1:]
     assert len(lines) == 1 and "\r" not in lines[0]
     assert lines[0].startswith("sweep: 3 points, 1 branch, up to 5400.0 Hz, ")

@@ -181,10 +181,13 @@ def test_truncation_check_raises_K_where_the_first_choice_is_short(train, monkey
 def test_a_fixed_K_is_checked_kept_and_warned_about(paper_train_h1):
     """The user's K is theirs: checked, kept, and where the estimate exceeds the target,
     warned about with the number (one stiffness harmonic, K = 8 at 2.4 kHz: about 4.6%)."""
+    said = []
     with pytest.warns(_harmonics.TruncationWarning, match=r"K = 8: truncation estimate "
                       r"\d\.\d\d% .*against K = 16; target 0\.5%\): omit `harmonics`"):
         fixed = _sweep.sweep(paper_train_h1, "first", 2400, 2410, linear=True, points=2,
-                             harmonics=8)
+                             harmonics=8, say=said.append)
     assert [k for *_, k in fixed.segments] == [8]
+    # the check, which runs before the first point, is announced before it runs
+    assert said == ["sweep: truncation check, segment 1 of 1 at 2400.0 Hz: K = 8 against 16"]
     (check,) = json.loads(fixed.dataset.attrs["solver"])["truncation"]
     assert check["K"] == 8 and check["K_check"] == 16 and check["change"] > 0.005

@@ -45,6 +45,7 @@ def sweep(
     max_detour: int = _walk.MAX_DETOUR,
     smoothing: float = 0.0,
     progress: Callable[[int, float], None] | None = None,
+    say: Callable[[str], None] | None = None,
     journal=None,
     resume: bool = False,
     command: str | None = None,
@@ -65,6 +66,8 @@ def sweep(
     frequency_hz, branches)``: called per point with the points kept so far, the
     frequency reached (Hz) and the branches begun so far (restarts plus one), the third
     argument only where ``progress`` takes one (:func:`.progress.with_branches`);
+    ``say(line)``: called with a line of text before each step that runs before the
+    first point (each truncation check of a segment's harmonics);
     ``command``: how the sweep was asked for, kept
     as the dataset's ``command`` attribute (default: empty).
 
@@ -150,7 +153,7 @@ def sweep(
                   max_points=max_points, max_detour=max_detour, runaway=runaway)
     try:
         segments, truncation, start = _segments.checked_segments(
-            ctx, segments, F_static, fixed=harmonics is not None)
+            ctx, segments, F_static, fixed=harmonics is not None, say=say)
     except BaseException:
         log.close()
         raise

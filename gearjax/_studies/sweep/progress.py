@@ -61,6 +61,15 @@ class SweepProgress:
             self.bar.set_description_str(self._status(float(f_hz)), refresh=False)
             self.bar.update(self._covered(self.reached_hz) - self.bar.n)
 
+    def note(self, line: str) -> None:
+        """Write ``line`` on the stream (above the bar where it is live), for the steps
+        that run before the first point (a sweep's ``say``)."""
+        if self.bar is not None:
+            self.bar.write(line, file=self.stream)
+        else:
+            self.stream.write(line + "\n")
+            self.stream.flush()
+
     def final_line(self) -> str:
         """``sweep: N points, B branches, up to F Hz, T s``."""
         return (f"sweep: {self.points} points, {self.branches} "

@@ -48,7 +48,7 @@ def band_segments(from_hz, to_hz, mu_ref, min_k, eta, fixed, cutoff_hz, system=N
     return segs
 
 
-def checked_segments(ctx, segments, F_static, *, fixed: bool):
+def checked_segments(ctx, segments, F_static, *, fixed: bool, say=None):
     """``(segments, estimates, start)``: the segments with K checked a posteriori, the
     estimates ``[{"from_hz", "K", "change", "K_check", "backlash"}]`` (``backlash``:
     whether the checked point had it; ``skipped`` instead where the check was not
@@ -66,8 +66,10 @@ def checked_segments(ctx, segments, F_static, *, fixed: bool):
     ``harmonics``) is checked, warned about (``TruncationWarning``) and kept. A resumed
     run checks again (the same decisions on the same machine); a journal segment solved
     with another K is refused where the walk reaches it
-    (:meth:`gearjax._studies.sweep.record.SweepLog.require_K`)."""
+    (:meth:`gearjax._studies.sweep.record.SweepLog.require_K`). ``say(line)`` is told
+    of each check before it runs."""
     target = _harmonics.TRUNCATION_TARGET
+    say = say or (lambda line: None)
     out, estimates, start = [], [], None
     for i, (f_a, f_b, K) in enumerate(segments):
         angles = range(len(K)) if isinstance(K, tuple) else (0,)
@@ -86,6 +88,9 @@ def checked_segments(ctx, segments, F_static, *, fixed: bool):
                         f"sweep: segment from {f_a:.1f} Hz with K = "
                         f"{_harmonics.orders_text(K)}: truncation{where} not checked ({skip})"))
                     continue
+                say(f"sweep: truncation check, segment {i + 1} of {len(segments)} at "
+                    f"{f_a:.1f} Hz: K = {_harmonics.orders_text(K)} against "
+                    f"{_harmonics.orders_text(K2)}")
                 if K not in solved:
                     solved[K] = checked_point(ctx, K, f_a, solved.get(previous),
                                               first=i == 0)
