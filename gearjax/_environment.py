@@ -12,13 +12,14 @@ import os
 from collections.abc import Mapping
 
 from ._errors import TrainError, field_message
+from ._studies.concurrency import THREADS_ENV, THREADS_RULE, threads_setting
 
 PREFIX = "GEARJAX_"
 
 SWITCH = "0 or 1 (empty: unset)"
 
 RULES: dict[str, str] = {
-    "GEARJAX_THREADS": "must be an integer >= 1 (1: no threads)",
+    THREADS_ENV: THREADS_RULE,
     "GEARJAX_KEEP_PROGRAMS": f"must be {SWITCH}",
     "GEARJAX_DEBUG": f"must be {SWITCH}",
     "GEARJAX_CACHE_DIR": "must be a directory (made where it does not exist) or 0 (no cache)",
@@ -29,8 +30,12 @@ RULES: dict[str, str] = {
 
 def _holds(name: str, value: str) -> bool:
     value = value.strip()
-    if name == "GEARJAX_THREADS":
-        return value == "" or (value.lstrip("+").isdigit() and int(value) >= 1)
+    if name == THREADS_ENV:
+        try:
+            threads_setting(value)
+        except ValueError:
+            return False
+        return True
     if name == "GEARJAX_CACHE_DIR":
         path = os.path.expanduser(value)
         return value in ("", "0") or not os.path.exists(path) or os.path.isdir(path)

@@ -90,9 +90,9 @@ def geometry_warnings(train: Train) -> list[str]:
                 f"centre-distance mismatch of {gap:+.3g} mm at module {float(s.module_mm):g} mm; "
                 "data kept as given"
             )
-        off = [(i, psi, (zs + zr) * psi / 360.0)
-               for i, psi in enumerate(np.asarray(s.planet_angles_deg))
-               if abs((zs + zr) * psi / 360.0 - round((zs + zr) * psi / 360.0)) > 1e-6]
+        slots = [(i, psi, (zs + zr) * psi / 360.0)
+                 for i, psi in enumerate(np.asarray(s.planet_angles_deg))]
+        off = [(i, psi, q) for i, psi, q in slots if abs(q - round(q)) > 1e-6]
         if len(off) == 1:
             ((i, psi, q),) = off
             out.append(

@@ -29,6 +29,8 @@ from .._errors import one_line
 THREADS_ENV = "GEARJAX_THREADS"
 """Environment variable: the most threads the studies may use (1: serial)."""
 
+THREADS_RULE = "must be an integer >= 1 (1: no threads)"
+
 
 def cores() -> int:
     """CPU cores this process may run on (>= 1)."""
@@ -44,17 +46,23 @@ def threads() -> int:
 
     **Raises:** ``ValueError`` where ``GEARJAX_THREADS`` is set to anything but an
     integer >= 1."""
-    setting = os.environ.get(THREADS_ENV, "").strip()
+    n = threads_setting(os.environ.get(THREADS_ENV, ""))
+    return cores() if n is None else min(n, cores())
+
+
+def threads_setting(value: str) -> int | None:
+    """The ``GEARJAX_THREADS`` value ``value`` read: ``None`` where empty, else the
+    integer. **Raises:** ``ValueError`` (one line) where it is not an integer >= 1."""
+    setting = value.strip()
     if not setting:
-        return cores()
+        return None
     try:
         n = int(setting)
     except ValueError:
         n = 0
     if n < 1:
-        raise ValueError(one_line(f"{THREADS_ENV} = {setting!r}: must be an integer >= 1 "
-                                  "(1: no threads)"))
-    return min(n, cores())
+        raise ValueError(one_line(f"{THREADS_ENV} = {setting!r}: {THREADS_RULE}"))
+    return n
 
 
 def parallel() -> bool:
