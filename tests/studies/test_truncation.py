@@ -129,9 +129,9 @@ def eight_stage_train() -> str:
 def test_eight_groups_are_refused_by_their_grid_before_it_is_built():
     """Eight incommensurate groups at the floor orders (2 per angle): a factorisation of
     4,641 unknowns would fit, but the AFT grid of 16 samples per angle holds 16^8 = 4.3e9
-    samples (about 13 TB of arrays on it). The size rule counts the set and the grid without building
-    either and refuses in one line, instead of enumerating or allocating them (which ran
-    out of memory)."""
+    samples (about 13 TB of arrays on it). The size rule counts the set and the grid
+    without building either and refuses in one line, instead of enumerating or
+    allocating them (which ran out of memory)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", gj.TrainWarning)
         train = gj.loads_train(eight_stage_train(), source="eight.toml")
