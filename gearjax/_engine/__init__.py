@@ -35,6 +35,10 @@ from .hb import linear_guess as linear_guess
 from .hb import omega_derivative as omega_derivative
 from .hb import residual as hb_residual
 from .hill import hill_multipliers as hill_multipliers
+from .krylov import KrylovHB as KrylovHB
+from .krylov import PairPreconditioner as PairPreconditioner
+from .krylov import pair_preconditioner as pair_preconditioner
+from .krylov import uses_krylov as uses_krylov
 from .linear_solver import CondensedLU as CondensedLU
 from .linear_solver import HBJacobian as HBJacobian
 from .mesh_force import backlash as backlash

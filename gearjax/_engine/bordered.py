@@ -235,7 +235,7 @@ def _complete_bases(A: Array) -> Array:
     ``(n, nv)`` (full column rank), ``u`` their orthogonal complement.
 
     Householder reflections in array operations (one loop body), not LAPACK (see
-    :func:`_inverses`).
+    :func:`small_inverses`).
     """
     B, n, nv = A.shape
     rows = jnp.arange(n)
@@ -255,7 +255,7 @@ def _complete_bases(A: Array) -> Array:
     return jnp.concatenate([Q[:, :, nv:], Q[:, :, :nv]], axis=2)
 
 
-def _inverses(A: Array) -> Array:
+def small_inverses(A: Array) -> Array:
     """Inverses ``(B, p, p)`` of a batch of small matrices: Gauss-Jordan elimination with
     partial pivoting in array operations, equilibrated first; one loop body (unrolled,
     every step would be separate compiled kernels: XLA's CPU code for them takes memory
@@ -300,7 +300,7 @@ def _condense(groups, r: int):
     L_vu``, ``F = L_uv Vinv``.
 
     The inverses of both groups are one batch (the mean's block padded with an identity
-    to a pair's size), :func:`_inverses`.
+    to a pair's size), :func:`small_inverses`.
     """
     parts = []
     for L in groups:
@@ -313,7 +313,7 @@ def _condense(groups, r: int):
     nv = mean_vv.shape[-1]
     padded = jnp.zeros((1, 2 * nv, 2 * nv)).at[0, :nv, :nv].set(mean_vv[0]).at[
         0, nv:, nv:].set(jnp.eye(nv))
-    inverse = _inverses(jnp.concatenate([padded, pairs_vv]))
+    inverse = small_inverses(jnp.concatenate([padded, pairs_vv]))
     out = []
     for (Luu, Luv, Lvu, _), Vinv in zip(parts, (inverse[:1, :nv, :nv], inverse[1:])):
         E = Vinv @ Lvu

@@ -30,6 +30,7 @@ from jaxtyping import Array
 from . import bordered as _bordered
 from . import corrector as _corrector
 from . import hb as _hb
+from . import krylov as _krylov
 from .kept import kept_program
 from .results import RESULTS
 
@@ -54,14 +55,18 @@ class AbstractParameter(eqx.Module):
     def d_lambda(self, y, lam):
         return jax.jvp(lambda l: self.residual(y, l), (lam,), (jnp.ones_like(lam),))[1]
 
-    def factor(self, y, lam, ty, tlam, single: bool = False) -> _bordered.Factors:
+    def factor(self, y, lam, ty, tlam, single: bool = False):
         """Factors of the bordered Jacobian ``[[dG/dy, dG/dlambda], [ty^T, tlam]]``:
-        condensed to the motions that deflect a mesh where some deflect none
-        (``problem.mesh_null``; ``_bordered.factor``, from the harmonic-balance
-        Jacobian), else dense from :meth:`jacobian`. A subclass that replaces the
-        residual of such a problem replaces this too."""
+        for matrix-free solves where those are cheaper for :data:`SOLVES_PER_FACTORISATION`
+        solves (``_krylov.uses_krylov``; ``_krylov.factor``, no factorisation, ``single``
+        has no effect); else condensed to the motions that deflect a mesh where some deflect
+        none (``problem.mesh_null``; ``_bordered.factor``, from the harmonic-balance
+        Jacobian), else dense from :meth:`jacobian`. Solved with ``_krylov.solve``. A
+        subclass that replaces the residual of such a problem replaces this too."""
         problem, omega = self.split(lam)
         g = self.d_lambda(y, lam)
+        if _krylov.uses_krylov(problem, SOLVES_PER_FACTORISATION):
+            return _krylov.factor(problem, y, omega, g, ty, tlam)
         if problem.mesh_null is None:
             return _bordered.dense(self.jacobian(y, lam), g, ty, tlam, single)
         return _bordered.factor(problem, y, omega, g, ty, tlam, single)
@@ -135,7 +140,8 @@ class ArcState(eqx.Module):
     (``tlam`` = d lambda / ds); ``h``: next step; ``accepted``: the attempt
     succeeded; ``fold``: the accepted step crossed a fold (``tlam`` changed sign);
     ``fold_lam``: its located parameter value; ``steps``: corrector iterations;
-    ``factors``: of the bordered Jacobian at the current point (``_bordered.Factors``),
+    ``factors``: of the bordered Jacobian at the current point (``_bordered.Factors``,
+    or ``_krylov.KrylovFactors`` where the problem's solves are matrix-free),
     reused by the next corrector (Broyden from them: one factorisation per point), or at an
     earlier one (``Settings.reuse``): ``age`` accepted points back, last row that point's
     own tangent where ``own`` is set, else the tangent of the point before it (or, for
@@ -151,7 +157,7 @@ class ArcState(eqx.Module):
     fold: Array
     fold_lam: Array
     steps: Array
-    factors: _bordered.Factors
+    factors: _bordered.Factors | _krylov.KrylovFactors
     age: Array
     own: Array
 
@@ -176,15 +182,15 @@ def _tangent(param: AbstractParameter, y, lam, ty, tlam, factors, single: bool, 
     """
     e = jnp.zeros(y.shape[0] + 1).at[-1].set(1.0)
     if fresh is True and not single:
-        return _bordered.solve(factors, e), jnp.asarray(True)
-    t = jax.lax.cond(fresh, lambda: _bordered.solve(factors, e), lambda: jnp.append(ty, tlam))
+        return _krylov.solve(factors, e), jnp.asarray(True)
+    t = jax.lax.cond(fresh, lambda: _krylov.solve(factors, e), lambda: jnp.append(ty, tlam))
     size = jnp.where(fresh, jnp.linalg.norm(t), jnp.inf)
     exact = fresh & (not single)
 
     def refine(c):
         t, size, _, i = c
         Jt = jax.jvp(param.residual, (y, lam), (t[:-1], t[-1]))[1]
-        d = _bordered.solve(factors, e - jnp.concatenate([Jt, (ty @ t[:-1] + tlam * t[-1])[None]]))
+        d = _krylov.solve(factors, e - jnp.concatenate([Jt, (ty @ t[:-1] + tlam * t[-1])[None]]))
         new = jnp.linalg.norm(d)
         rho = new / size  # no estimate after the first correction from an old tangent
         contracts = jnp.isfinite(size) & (rho < 1)
@@ -209,6 +215,13 @@ SINGLE_REFINE = 4
 SINGLE_TOL = 1e-4
 """A refined tangent is accurate where its estimated error is below this fraction of it
 (:func:`_tangent`)."""
+
+
+SOLVES_PER_FACTORISATION = Settings.max_corrector + SINGLE_REFINE + 1
+"""Most bordered solves one point's Jacobian serves with the default settings: the
+corrector's iterations, the tangent's refinements and its first solve (the matrix-free
+choice of :meth:`AbstractParameter.factor` weighs a factorisation against this many
+Krylov solves)."""
 
 
 def tangent_factors(param: AbstractParameter, y, lam, ty, tlam, single: bool = False,

@@ -5,8 +5,9 @@ Solves ``[G(y, lambda); t . (z - z_pred)] = 0`` for ``z = (y, lambda)`` from the
 predictor ``z_pred``, ``G`` the residual of an
 :class:`~gearjax._engine.continuation.AbstractParameter` and ``t = (ty, tlam)`` the
 tangent at the last point. Each quasi-Newton iteration is one solve with the bordered
-Jacobian factorised at the last point (:mod:`gearjax._engine.bordered`) and a few dot
-products: Broyden's secant updates learn how the Jacobian changed over the step (with
+Jacobian at the last point (factorised, :mod:`gearjax._engine.bordered`, or kept for
+matrix-free solves, :mod:`gearjax._engine.krylov`; ``krylov.solve`` either way) and a
+few dot products: Broyden's secant updates learn how the Jacobian changed over the step (with
 exact backlash it changes by the time samples that crossed a contact boundary, which a
 chord iteration contracts away only linearly). When the iterations stop contracting,
 the corrector restarts from the predictor in full Newton, refactorising at every
@@ -23,7 +24,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from . import bordered as _bordered
+from . import krylov as _krylov
 
 
 class _Corrector(eqx.Module):
@@ -66,7 +67,7 @@ def broyden_step(z, steps, i):
     return jnp.where(ok, z / jnp.where(ok, denom, 1.0), z)
 
 
-def correct(param, factors: _bordered.Factors, ty, tlam, y_p, lam_p, rtol: float,
+def correct(param, factors, ty, tlam, y_p, lam_p, rtol: float,
             max_corrector: int, full_newton=True):
     """Correct the predictor ``(y_p, lam_p)`` onto the branch of ``param`` (jittable).
 
@@ -88,7 +89,7 @@ def correct(param, factors: _bordered.Factors, ty, tlam, y_p, lam_p, rtol: float
     def iterate(c, factors, full):
         r = param.residual(c.y, c.lam)
         arc = ty @ (c.y - y_p) + tlam * (c.lam - lam_p)
-        d = _bordered.solve(factors, -jnp.concatenate([r, arc[None]]))
+        d = _krylov.solve(factors, -jnp.concatenate([r, arc[None]]))
         if not full:
             d = broyden_step(d, c.steps, c.i)
         size = jnp.max(jnp.abs(d))

@@ -52,6 +52,10 @@ from .system import System
 
 
 
+LINEAR_SOLVERS = ("auto", "lu", "krylov")
+"""Values of ``HarmonicBalance.linear_solver``."""
+
+
 class HarmonicBalance(eqx.Module):
     """Harmonic-balance settings (static: they are compile keys).
 
@@ -64,7 +68,12 @@ class HarmonicBalance(eqx.Module):
     ``rtol``: Newton tolerance on
     the scaled step and residual; ``max_steps``: Newton iterations; ``smoothing``: 0 for
     the exact piecewise-linear backlash, ``s > 0`` rounds its corners over ``s b``
-    (``gearjax._engine.mesh_force.backlash``): an option for branches that graze a contact boundary.
+    (``gearjax._engine.mesh_force.backlash``): an option for branches that graze a contact boundary;
+    ``linear_solver``: how Newton and implicit derivatives solve with the Jacobian, one of
+    :data:`LINEAR_SOLVERS`: ``"lu"`` the condensed factorisation
+    (:mod:`gearjax._engine.bordered`), ``"krylov"`` preconditioned BiCGStab on
+    Jacobian-vector products (:mod:`gearjax._engine.krylov`), ``"auto"`` the one that
+    costs less for the problem's size (:func:`gearjax._engine.krylov.uses_krylov`).
     """
 
     n_harmonics: int | tuple[int, ...] = eqx.field(static=True, default=32)
@@ -74,6 +83,7 @@ class HarmonicBalance(eqx.Module):
     max_steps: int = eqx.field(static=True, default=40)
     smoothing: float = eqx.field(static=True, default=0.0)
     truncation: str = eqx.field(static=True, default="diamond")
+    linear_solver: str = eqx.field(static=True, default="auto")
 
 
 def highest_excitation(system: System, eta: int = 1, angle: int = 0) -> int:
@@ -131,9 +141,13 @@ def harmonic_basis(system: System, settings: "HarmonicBalance") -> _aft.Basis:
     **Raises:** ``ValueError`` where the discretisation cannot hold the excitation:
     ``K_g`` below the angle's highest excitation order (:func:`highest_excitation`),
     ``n_time`` too few samples for the product of the stiffness and a deflection
-    (``2 K + highest`` or fewer: aliased), or ``eta > 1`` on a torus.
+    (``2 K + highest`` or fewer: aliased), ``eta > 1`` on a torus, or a
+    ``linear_solver`` not in :data:`LINEAR_SOLVERS`.
     """
     G, eta = system.n_angles, settings.eta
+    if settings.linear_solver not in LINEAR_SOLVERS:
+        raise ValueError(f"HarmonicBalance.linear_solver = {settings.linear_solver!r}: one of "
+                         f"{', '.join(repr(v) for v in LINEAR_SOLVERS)}")
     if G > 1 and eta != 1:
         raise ValueError(f"HarmonicBalance.eta = {eta}: sub-harmonic solutions are periodic; "
                          f"a system of {G} torus angles has eta = 1")
@@ -284,10 +298,10 @@ def mesh_samples(problem: HBProblem, P: Array, omega) -> tuple[Array, Array, Arr
     p = _aft.torus_synthesis(basis, P).T - problem.te
     p_dot = w0 * (_aft.torus_synthesis(basis, _aft.torus_derivative(basis, P)).T
                   - problem.te_rate)
-    return p, p_dot, _sampled_force(problem, p, p_dot)
+    return p, p_dot, sampled_force(problem, p, p_dot)
 
 
-def _sampled_force(problem: HBProblem, p: Array, p_dot: Array) -> Array:
+def sampled_force(problem: HBProblem, p: Array, p_dot: Array) -> Array:
     """The shared ``mesh_force`` at the ``(m, T)`` AFT samples of deflection and rate."""
     s = problem.system
     return mesh_force(p, p_dot, problem.kappa, s.kbar[:, None], s.backlash[:, None],
@@ -365,12 +379,20 @@ def mesh_blocks(problem: HBProblem, P: Array, omega) -> Array:
     basis = problem.basis
     p, p_dot, _ = mesh_samples(problem, P, omega)
     w0 = omega / problem.settings.eta
-    ones = jnp.ones_like(p)
-    # the force at a sample depends on that sample only: a JVP with ones is the diagonal
-    a = jax.jvp(lambda q: _sampled_force(problem, q, p_dot), (p,), (ones,))[1]
-    b = jax.jvp(lambda v: _sampled_force(problem, p, v), (p_dot,), (ones,))[1]
+    a, b = force_slopes(problem, p, p_dot)
     return (_aft.torus_product_matrix(basis, a)
             + w0 * _aft.torus_times_derivative(basis, _aft.torus_product_matrix(basis, b)))
+
+
+def force_slopes(problem: HBProblem, p: Array, p_dot: Array) -> tuple[Array, Array]:
+    """``dF/dp`` (N/m) and ``dF/dp'`` (N s/m) of every mesh at the ``(m, T)`` AFT samples
+    of deflection ``p`` and rate ``p_dot`` (exact, forward mode through the shared mesh
+    force)."""
+    ones = jnp.ones_like(p)
+    # the force at a sample depends on that sample only: a JVP with ones is the diagonal
+    a = jax.jvp(lambda q: sampled_force(problem, q, p_dot), (p,), (ones,))[1]
+    b = jax.jvp(lambda v: sampled_force(problem, p, v), (p_dot,), (ones,))[1]
+    return a, b
 
 
 def omega_derivative(problem: HBProblem, y: Array, omega) -> Array:

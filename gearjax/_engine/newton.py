@@ -29,6 +29,7 @@ import optimistix as optx
 from jaxtyping import Array
 
 from . import hb as _hb
+from . import krylov as _krylov
 from .kept import kept_program
 from .linear_solver import CondensedLU, HBJacobian
 from .results import RESULTS
@@ -126,7 +127,8 @@ def _jacobian(y, args):
 def _iterate(problem: _hb.HBProblem, omega, y0: Array, chord: bool) -> _hb.HBSolution:
     """``optimistix.root_find`` with :class:`FactorisedNewton` on the scaled residual."""
     settings = problem.settings
-    solver = FactorisedNewton(rtol=settings.rtol, operator=_jacobian, chord=chord)
+    solver = FactorisedNewton(rtol=settings.rtol, operator=_jacobian, chord=chord,
+                              linear_solver=_krylov.linear_solver(problem))
     sol = optx.root_find(_residual, solver, y0, (problem, omega), max_steps=settings.max_steps,
                          throw=False)
     y = sol.value
@@ -145,8 +147,11 @@ def newton(problem: _hb.HBProblem, omega, y0: Array) -> _hb.HBSolution:
     (``nonlinear_max_steps_reached``), after :data:`PATIENCE` steps without a new lowest
     residual (``nonlinear_divergence``), or on a non-finite value, keeping the last
     finite iterate (``nonfinite``): never NaN silently. Each
-    step factorises the Jacobian condensed to the motions that deflect a mesh
-    (:class:`~gearjax._engine.linear_solver.CondensedLU`).
+    step solves with the Jacobian at the iterate by the solver of
+    ``problem.settings.linear_solver`` (:func:`gearjax._engine.krylov.linear_solver`): the
+    condensed factorisation (:class:`~gearjax._engine.linear_solver.CondensedLU`) or
+    preconditioned BiCGStab on Jacobian-vector products
+    (:class:`~gearjax._engine.krylov.KrylovHB`).
     """
     return _iterate(problem, jnp.asarray(omega, dtype=float), y0, chord=False)
 
@@ -167,9 +172,9 @@ def solve_linear(problem: _hb.HBProblem, omega, y0: Array | None = None) -> _hb.
 
     With zero backlash every mesh force is linear in its deflection, however its
     stiffness varies in time, so the residual is affine in ``y`` and its Jacobian the
-    same everywhere: it is factorised once (at ``y0``, default
-    :func:`~gearjax._engine.hb.linear_guess`) and every step is a solve with those
-    factors (the chord method). The first step is exact up to round-off; the next ones
+    same everywhere: it is factorised (matrix-free: its slopes and preconditioner kept) once (at
+    ``y0``, default :func:`~gearjax._engine.hb.linear_guess`) and every step is a solve
+    with it (the chord method). The first step is exact up to round-off; the next ones
     refine it and apply :func:`newton`'s test and results. The caller guarantees
     zero backlash (with backlash this is a chord iteration from ``y0``).
     """

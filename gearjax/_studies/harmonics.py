@@ -47,6 +47,7 @@ import numpy as np
 from .._engine import aft as _aft
 from .resources import available_memory
 from .._engine import hb as _hb
+from .._engine import krylov as _krylov
 from .._errors import bad_argument
 from .._engine.modal import mode_classes
 from .._engine.newton import newton_jit
@@ -255,6 +256,25 @@ def memory_bytes(system: System, K) -> int:
     return 8 * (4 * N * N + system.n_meshes * C * C * (r + 2)) + _grid_bytes(system, K)
 
 
+def solves_by_krylov(system: System, K) -> bool:
+    """Whether a Newton solve at ``K`` (``linear_solver = "auto"``) goes through the
+    matrix-free solver (``_krylov.krylov_cheaper`` on the shapes of ``K``, counted
+    without building the problem)."""
+    C = coefficient_count(system, K)
+    r = (factor_unknowns(system, K) - 1) // C
+    return _krylov.krylov_cheaper(C, system.n_dof, r, system.n_meshes,
+                                  grid_samples(system, K))
+
+
+def krylov_memory_bytes(system: System, K) -> int:
+    """Estimated peak memory (bytes) of one matrix-free Newton step at ``K``: the arrays
+    on the AFT grid twice (the residual's and the linearisation's,
+    :func:`grid_samples`), the preconditioner's blocks (``C (2n)^2`` doubles) and the
+    Newton and BiCGStab vectors (sixteen of ``C n`` doubles)."""
+    C, n = coefficient_count(system, K), system.n_dof
+    return 8 * (C * (2 * n) ** 2 + 16 * C * n) + 2 * _grid_bytes(system, K)
+
+
 @functools.cache
 def _lu_rate() -> float:
     """Floating-point operations per second of a dense LU on this machine (LAPACK through
@@ -311,21 +331,28 @@ def _size(n_bytes: float) -> str:
 
 MAX_CHECK_UNKNOWNS = 16384
 """Largest factorisation (unknowns) the truncation check may solve at 2K: a dense LU of
-2.9e12 floating-point operations and 2 GB a copy. Beyond it (or beyond the memory
+2.9e12 floating-point operations and 2 GB a copy. A check whose solve is matrix-free
+(:func:`solves_by_krylov`) is bounded by memory only. Beyond it (or beyond the memory
 share) the check is skipped and the result says so. A size, not a timing: the decision
 is the same on every run."""
 
 
 def check_affordable(system: System, K, g: int = 0) -> str | None:
     """``None`` where the truncation check of a point at ``K`` (a solve at ``2 K``; on a
-    torus with angle ``g``'s order doubled, :func:`widened`) fits ``MAX_CHECK_UNKNOWNS``
-    and the memory share; else why not, in words."""
+    torus with angle ``g``'s order doubled, :func:`widened`) fits: matrix-free where
+    :func:`solves_by_krylov` (its memory, :func:`krylov_memory_bytes`, within the
+    memory share), else a factorisation of at most ``MAX_CHECK_UNKNOWNS`` within the
+    memory share; else why not, in words."""
     K2 = widened(K, g)
-    N = factor_unknowns(system, K2)
-    if N > MAX_CHECK_UNKNOWNS:
-        return (f"a check at K = {orders_text(K2)} would factorise {N} unknowns, more than "
-                f"{MAX_CHECK_UNKNOWNS}")
-    need, avail = memory_bytes(system, K2), available_memory()
+    if solves_by_krylov(system, K2):
+        need = krylov_memory_bytes(system, K2)
+    else:
+        N = factor_unknowns(system, K2)
+        if N > MAX_CHECK_UNKNOWNS:
+            return (f"a check at K = {orders_text(K2)} would factorise {N} unknowns, more "
+                    f"than {MAX_CHECK_UNKNOWNS}")
+        need = memory_bytes(system, K2)
+    avail = available_memory()
     if need > MEMORY_SHARE * avail:
         return (f"a check at K = {orders_text(K2)} would need about {_size(need)} of the "
                 f"{_size(avail)} available")
