@@ -41,7 +41,7 @@ from . import aft as _aft
 from . import bordered as _bordered
 from . import hb as _hb
 from .bordered import small_inverses
-from .linear_solver import CondensedLU, HBJacobian
+from .linear_solver import CondensedLU, HBJacobian, register_structured
 
 STEP_BOUND = 200
 """BiCGStab steps per solve (each two Jacobian-vector products and two preconditioner
@@ -101,27 +101,7 @@ class PairPreconditioner(lx.AbstractLinearOperator):
         return self.in_structure()
 
 
-@lx.linearise.register(PairPreconditioner)
-@lx.materialise.register(PairPreconditioner)
-def _(operator):
-    return operator
-
-
-@lx.diagonal.register(PairPreconditioner)
-def _(operator):
-    return jnp.diag(operator.as_matrix())
-
-
-@lx.is_symmetric.register(PairPreconditioner)
-@lx.is_diagonal.register(PairPreconditioner)
-@lx.is_tridiagonal.register(PairPreconditioner)
-@lx.has_unit_diagonal.register(PairPreconditioner)
-@lx.is_lower_triangular.register(PairPreconditioner)
-@lx.is_upper_triangular.register(PairPreconditioner)
-@lx.is_positive_semidefinite.register(PairPreconditioner)
-@lx.is_negative_semidefinite.register(PairPreconditioner)
-def _(operator):
-    return False
+register_structured(PairPreconditioner)
 
 
 class Slopes(eqx.Module):

@@ -59,27 +59,22 @@ class HBJacobian(lx.AbstractLinearOperator):
         return jax.ShapeDtypeStruct(self.y.shape, self.y.dtype)
 
 
-@lx.linearise.register(HBJacobian)
-@lx.materialise.register(HBJacobian)
-def _(operator):
-    return operator
+def register_structured(operator_type: type) -> type:
+    """Register a lineax operator class of ours with lineax's structure queries: it is
+    its own linearisation and materialisation, its diagonal is that of ``as_matrix()``,
+    and it claims no structure (not symmetric, triangular, definite, ...). Returns the
+    class."""
+    for query in (lx.linearise, lx.materialise):
+        query.register(operator_type)(lambda operator: operator)
+    lx.diagonal.register(operator_type)(lambda operator: jnp.diag(operator.as_matrix()))
+    for query in (lx.is_symmetric, lx.is_diagonal, lx.is_tridiagonal, lx.has_unit_diagonal,
+                  lx.is_lower_triangular, lx.is_upper_triangular,
+                  lx.is_positive_semidefinite, lx.is_negative_semidefinite):
+        query.register(operator_type)(lambda operator: False)
+    return operator_type
 
 
-@lx.diagonal.register(HBJacobian)
-def _(operator):
-    return jnp.diag(operator.as_matrix())
-
-
-@lx.is_symmetric.register(HBJacobian)
-@lx.is_diagonal.register(HBJacobian)
-@lx.is_tridiagonal.register(HBJacobian)
-@lx.has_unit_diagonal.register(HBJacobian)
-@lx.is_lower_triangular.register(HBJacobian)
-@lx.is_upper_triangular.register(HBJacobian)
-@lx.is_positive_semidefinite.register(HBJacobian)
-@lx.is_negative_semidefinite.register(HBJacobian)
-def _(operator):
-    return False
+register_structured(HBJacobian)
 
 
 class CondensedState(eqx.Module):
