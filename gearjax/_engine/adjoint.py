@@ -10,9 +10,9 @@ theorem gives its derivative without differentiating the Newton iterations:
 and a reverse pass through it is one solve with ``J^T``. Both go through lineax on
 :class:`~gearjax._engine.linear_solver.HBJacobian` with the problem's solver
 (:func:`gearjax._engine.krylov.linear_solver`): one factorisation at the point
-(:class:`~gearjax._engine.linear_solver.CondensedLU`), or one linearisation and
-preconditioner (:class:`~gearjax._engine.krylov.KrylovHB`), whose transpose serves the
-reverse pass. The unknowns and residual rows keep the
+(:class:`~gearjax._engine.linear_solver.CondensedLU`), or the meshes' force slopes and
+the preconditioner there (:class:`~gearjax._engine.krylov.KrylovHB`), whose transpose
+serves the reverse pass. The unknowns and residual rows keep the
 scales of the point (``x_scale``, ``residual_scale``), held constant: a change of scale
 is a change of variables, and at ``res = 0`` the row scale drops out of the derivative.
 """

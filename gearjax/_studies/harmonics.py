@@ -268,7 +268,7 @@ def solves_by_krylov(system: System, K) -> bool:
 
 def krylov_memory_bytes(system: System, K) -> int:
     """Estimated peak memory (bytes) of one matrix-free Newton step at ``K``: the arrays
-    on the AFT grid twice (the residual's and the linearisation's,
+    on the AFT grid twice (the residual's, and the force slopes the products use,
     :func:`grid_samples`), the preconditioner's blocks (``C (2n)^2`` doubles) and the
     Newton and BiCGStab vectors (sixteen of ``C n`` doubles)."""
     C, n = coefficient_count(system, K), system.n_dof
