@@ -19,6 +19,7 @@ from .._io.results import mesh_coordinates
 from .assembly import assemble
 from .frequency_groups import TorusLayout, gear_frequency_groups, torus_layout
 from .kinematics import Kinematics, kinematics, require_base
+from .static_loads import floating_reason
 from .train import Gear, Train
 
 
@@ -128,6 +129,18 @@ def torus_fields(case: GearCase) -> dict | None:
             "truncation": TORUS_TRUNCATION, "return_turns": q, "return_drift": d}
 
 
+def check_floating(train: Train, g: Gear, system: System) -> None:
+    """Refuse backlash where the gear floats in its clearances (``floating_reason``: no
+    mesh with backlash carries a static load the harmonic balance resolves).
+
+    **Raises:** ``TrainError`` naming ``gears.<name>.input_torque``.
+    """
+    reason = floating_reason(system)
+    if reason is not None:
+        raise fail(train.source, f"gears.{g.name}.input_torque", float(g.input_torque),
+                   f"{reason}: give the gear an input torque, or solve with `linear`")
+
+
 def gear_case(train: Train, gear: str | None = None, stage: str | None = None,
               linear: bool = False, torus: bool = False) -> GearCase:
     """Assemble ``gear`` for solving at mesh frequencies of reference stage ``stage``.
@@ -139,8 +152,9 @@ def gear_case(train: Train, gear: str | None = None, stage: str | None = None,
 
     **Raises:** ``TrainError`` for a gear where no mesh turns, no common base within
     the periodic balance's limit (a periodic system of such a gear), an unknown or
-    non-turning stage, or backlash on an unloaded stage without ``drag_torque``
-    (unless ``linear``, which drops the backlash).
+    non-turning stage, backlash on an unloaded stage without ``drag_torque``, or
+    backlash on a gear that floats in its clearances (:func:`check_floating`) (unless
+    ``linear``, which drops the backlash).
     """
     g = train.gear(gear)
     kin = kinematics(train, g.name)
@@ -159,6 +173,7 @@ def gear_case(train: Train, gear: str | None = None, stage: str | None = None,
         system = dataclasses.replace(system, backlash=jnp.zeros_like(system.backlash))
     else:
         check_unloaded(train, g, kin, system)
+        check_floating(train, g, system)
     return GearCase(train=train, gear=g, kin=kin, mu=tuple(mu), stage=ref,
                     mu_ref=mu[train.stage_ids.index(ref)], system=system, linear=linear,
                     F_static=np.asarray(static_mesh_forces(system)), layout=layout)

@@ -11,8 +11,38 @@ import numpy as np
 
 from .assembly import assemble
 from .kinematics import kinematics
+from .._engine.hb import HarmonicBalance
 from .._engine.static import static_deflection
+from .._engine.system import System
+from .._errors import field_message, warn_range
 from .train import Train, member_index, member_paths
+
+FLOAT_RESOLUTION = HarmonicBalance().rtol
+"""Share of its backlash below which a mesh's static deflection is no load: the
+harmonic balance's unknowns are in units of the largest backlash, resolved to Newton's
+tolerance (``HarmonicBalance.rtol``)."""
+
+
+def floating_reason(system: System) -> str | None:
+    """Why ``system`` floats in its clearances, in words: every mesh with backlash has a
+    static deflection (``|F_static| / kbar``) below :data:`FLOAT_RESOLUTION` of its
+    backlash (no input torque, or one too small to press any tooth pair together as far
+    as the harmonic balance resolves). ``None`` where some mesh with backlash carries
+    load, or none has backlash."""
+    back = np.asarray(system.backlash)
+    rows = back > 0
+    if not np.any(rows):
+        return None
+    force = np.asarray(static_deflection(system)[1])
+    deflection = np.abs(force) / np.asarray(system.kbar)
+    if np.any(deflection[rows] > FLOAT_RESOLUTION * back[rows]):
+        return None
+    i = int(np.argmax(np.where(rows, deflection, -1.0)))
+    label = system.mesh_labels[i]
+    return (f"every mesh with backlash floats in its clearance: the largest static mesh "
+            f"deflection is {deflection[i]:.3g} m ({label}, static force {force[i]:.3g} N), "
+            f"below {FLOAT_RESOLUTION:g} of its backlash {back[i]:.3g} m, so no tooth pair "
+            "is pressed together and the mean position in the clearances is undetermined")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,9 +70,14 @@ class StaticLoads:
 
 
 def static_loads(train: Train, gear: str | None = None) -> StaticLoads:
-    """Static mesh forces, member torques and the torque balance of ``gear``."""
+    """Static mesh forces, member torques and the torque balance of ``gear``; a
+    ``RangeWarning`` where the gear floats in its clearances (:func:`floating_reason`)."""
     g = train.gear(gear)
     system = assemble(train, g.name, kinematics(train, g.name))
+    reason = floating_reason(system)
+    if reason is not None:
+        warn_range(field_message(train.source, f"gears.{g.name}.input_torque",
+                                 float(g.input_torque), reason))
     x, F = (np.asarray(a) for a in static_deflection(system))
     mesh_force = dict(zip(system.mesh_labels, F.tolist()))
     mesh_torque = dict(zip(system.mesh_labels, (np.asarray(system.mesh_radius) * F).tolist()))
