@@ -57,15 +57,17 @@ class AbstractParameter(eqx.Module):
 
     def factor(self, y, lam, ty, tlam, single: bool = False):
         """Factors of the bordered Jacobian ``[[dG/dy, dG/dlambda], [ty^T, tlam]]``:
-        for matrix-free solves where those are cheaper for :data:`SOLVES_PER_FACTORISATION`
-        solves (``_krylov.uses_krylov``; ``_krylov.factor``, no factorisation, ``single``
-        has no effect); else condensed to the motions that deflect a mesh where some deflect
+        for matrix-free solves where the problem's ``linear_solver`` is ``"krylov"``
+        (``_krylov.factor``, no factorisation, ``single`` has no effect; ``"auto"``
+        factorises here: a factorised point serves a corrector's and a tangent's solves
+        at about a millisecond each, and the matrix-free solve has no fallback inside the
+        corrector); else condensed to the motions that deflect a mesh where some deflect
         none (``problem.mesh_null``; ``_bordered.factor``, from the harmonic-balance
         Jacobian), else dense from :meth:`jacobian`. Solved with ``_krylov.solve``. A
         subclass that replaces the residual of such a problem replaces this too."""
         problem, omega = self.split(lam)
         g = self.d_lambda(y, lam)
-        if _krylov.uses_krylov(problem, SOLVES_PER_FACTORISATION):
+        if problem.settings.linear_solver == "krylov":
             return _krylov.factor(problem, y, omega, g, ty, tlam)
         if problem.mesh_null is None:
             return _bordered.dense(self.jacobian(y, lam), g, ty, tlam, single)
@@ -141,7 +143,7 @@ class ArcState(eqx.Module):
     succeeded; ``fold``: the accepted step crossed a fold (``tlam`` changed sign);
     ``fold_lam``: its located parameter value; ``steps``: corrector iterations;
     ``factors``: of the bordered Jacobian at the current point (``_bordered.Factors``,
-    or ``_krylov.KrylovFactors`` where the problem's solves are matrix-free),
+    or ``_krylov.KrylovFactors`` where they are matrix-free),
     reused by the next corrector (Broyden from them: one factorisation per point), or at an
     earlier one (``Settings.reuse``): ``age`` accepted points back, last row that point's
     own tangent where ``own`` is set, else the tangent of the point before it (or, for
@@ -215,13 +217,6 @@ SINGLE_REFINE = 4
 SINGLE_TOL = 1e-4
 """A refined tangent is accurate where its estimated error is below this fraction of it
 (:func:`_tangent`)."""
-
-
-SOLVES_PER_FACTORISATION = Settings.max_corrector + SINGLE_REFINE + 1
-"""Most bordered solves one point's Jacobian serves with the default settings: the
-corrector's iterations, the tangent's refinements and its first solve (the matrix-free
-choice of :meth:`AbstractParameter.factor` weighs a factorisation against this many
-Krylov solves)."""
 
 
 def tangent_factors(param: AbstractParameter, y, lam, ty, tlam, single: bool = False,

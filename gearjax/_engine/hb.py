@@ -72,8 +72,10 @@ class HarmonicBalance(eqx.Module):
     ``linear_solver``: how Newton and implicit derivatives solve with the Jacobian, one of
     :data:`LINEAR_SOLVERS`: ``"lu"`` the condensed factorisation
     (:mod:`gearjax._engine.bordered`), ``"krylov"`` preconditioned BiCGStab on
-    Jacobian-vector products (:mod:`gearjax._engine.krylov`), ``"auto"`` the one that
-    costs less for the problem's size (:func:`gearjax._engine.krylov.uses_krylov`).
+    Jacobian-vector products (:mod:`gearjax._engine.krylov`; the continuation's bordered
+    solves too), ``"auto"`` the one that costs less for the problem's size
+    (:func:`gearjax._engine.krylov.uses_krylov`), falling back to the LU where BiCGStab
+    does not converge (the continuation factorises).
     """
 
     n_harmonics: int | tuple[int, ...] = eqx.field(static=True, default=32)

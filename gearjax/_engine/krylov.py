@@ -19,11 +19,12 @@ changes: products of a harmonic with the excitation orders) is what the Krylov
 iterations resolve; the number of iterations does not grow with ``K``, because the
 highest harmonics, dominated by inertia, are inverted almost exactly.
 
-:func:`uses_krylov` decides between the condensed LU and this solver from the
-problem's shapes and the solves each Jacobian serves (:func:`krylov_cheaper`: one in
-Newton, a continuation point's bound in the bordered solves), with the iterations at
-their bound :data:`STEP_BOUND`: Krylov is chosen where even its worst case is cheaper
-than a factorisation and its solves, never on a measured timing.
+:func:`uses_krylov` decides between the condensed LU and this solver for Newton and
+implicit derivatives from the problem's shapes (:func:`krylov_cheaper`), with the
+iterations at their bound :data:`STEP_BOUND`: Krylov is chosen where even its worst case
+is cheaper than a factorisation, never on a measured timing, and a solve that does not
+converge falls back to the LU (:class:`KrylovHB`'s ``fallback``). The continuation's
+bordered solves are matrix-free only where asked for (``linear_solver = "krylov"``).
 """
 
 from __future__ import annotations
@@ -186,11 +187,13 @@ def _bicgstab(product, preconditioner, vector: Array):
 
 
 class KrylovState(eqx.Module):
-    """:class:`KrylovHB`'s state: the Jacobian's :class:`Slopes`, its preconditioner, and
-    whether solves are with ``J^T``."""
+    """:class:`KrylovHB`'s state: the Jacobian's :class:`Slopes`, its preconditioner, the
+    scaled unknowns ``y`` it is taken at (for the fallback), and whether solves are with
+    ``J^T``."""
 
     at: Slopes
     preconditioner: PairPreconditioner
+    y: Array
     transposed: bool = eqx.field(static=True, default=False)
 
 
@@ -202,16 +205,23 @@ class KrylovHB(lx.AbstractLinearSolver):
     ``init`` evaluates the mesh slopes and builds the preconditioner (no factorisation of
     ``J``); ``compute`` is one BiCGStab solve to :data:`RTOL` within :data:`STEP_BOUND`
     steps (``stats["num_steps"]``; past the bound, ``max_steps_reached`` with the last
-    iterate); ``transpose`` solves ``J^T x = b`` with the transposed product and
-    preconditioner (adjoints).
+    iterate, or a breakdown); ``transpose`` solves ``J^T x = b`` with the transposed
+    product and preconditioner (adjoints). With ``fallback``, a solve that does not
+    converge is done again with the condensed LU of ``J`` at the same point
+    (:class:`~gearjax._engine.linear_solver.CondensedLU`; ``stats["fallback"]``): the
+    preconditioner is the time-invariant gear's, and where the stiffness variation
+    couples the harmonics strongly (e.g. tests/data/three_stage.toml) BiCGStab from it
+    does not converge.
     """
+
+    fallback: bool = eqx.field(static=True, default=False)
 
     def init(self, operator, options: dict[str, Any]) -> KrylovState:
         del options
         if not isinstance(operator, HBJacobian):
             raise TypeError(f"KrylovHB solves HBJacobian operators, not {type(operator)}")
         at = slopes(operator.problem, operator.y, operator.omega)
-        state = KrylovState(at, pair_preconditioner(at))
+        state = KrylovState(at, pair_preconditioner(at), operator.y)
         return self.transpose(state, {})[0] if operator.transposed else state
 
     def compute(self, state: KrylovState, vector, options: dict[str, Any]):
@@ -229,10 +239,22 @@ class KrylovHB(lx.AbstractLinearSolver):
             preconditioner = state.preconditioner.transpose()
         else:
             preconditioner = state.preconditioner
-        return _bicgstab(product, preconditioner, vector)
+        x, result, stats = _bicgstab(product, preconditioner, vector)
+        if not self.fallback:
+            return x, result, stats
+        failed = result != lx.RESULTS.successful
+
+        def factorised(_):
+            jacobian = HBJacobian(state.at.problem, state.y, state.at.omega, state.transposed)
+            return lx.linear_solve(jacobian, vector, CondensedLU(), throw=False).value
+
+        x = jax.lax.cond(failed, factorised, lambda _: x, None)
+        return (x, lx.RESULTS.where(failed, lx.RESULTS.successful, result),
+                {**stats, "fallback": failed})
 
     def transpose(self, state: KrylovState, options: dict[str, Any]):
-        return KrylovState(state.at, state.preconditioner, not state.transposed), options
+        return (KrylovState(state.at, state.preconditioner, state.y, not state.transposed),
+                options)
 
     def conj(self, state: KrylovState, options: dict[str, Any]):
         return state, options  # real
@@ -320,32 +342,32 @@ def step_flops(C: int, n: int, m: int, T: int) -> float:
     return 2 * product + 2 * 2 * C * (2 * n) ** 2
 
 
-def krylov_cheaper(C: int, n: int, r: int, m: int, T: int, solves: int = 1) -> bool:
-    """Whether ``solves`` Krylov solves of :data:`STEP_BOUND` BiCGStab steps each
-    (:func:`step_flops`) cost less than one condensed LU (:func:`lu_flops`) and as many
-    solves with it on a Jacobian of these shapes: the worst case of the Krylov solves
-    against the fixed cost of a factorisation (whose solves, ``2 (C r)^2`` each, are
-    counted too)."""
-    lu = lu_flops(C, r) + solves * 2 * float(C * r) ** 2
-    return lu > solves * STEP_BOUND * step_flops(C, n, m, T)
+def krylov_cheaper(C: int, n: int, r: int, m: int, T: int) -> bool:
+    """Whether a Krylov solve of :data:`STEP_BOUND` BiCGStab steps (:func:`step_flops`)
+    costs less than one condensed LU (:func:`lu_flops`) and a solve with it on a Jacobian
+    of these shapes: the worst case of the Krylov solve against the fixed cost of a
+    factorisation."""
+    lu = lu_flops(C, r) + 2 * float(C * r) ** 2
+    return lu > STEP_BOUND * step_flops(C, n, m, T)
 
 
-def uses_krylov(problem: _hb.HBProblem, solves: int = 1) -> bool:
-    """Whether ``problem``'s solves go through :class:`KrylovHB` or
-    :class:`KrylovFactors`: ``settings.linear_solver`` ``"krylov"``, or ``"auto"`` where
-    :func:`krylov_cheaper` for ``solves`` solves per Jacobian (one in Newton; a
-    continuation point's bound in the bordered solves,
-    ``continuation.SOLVES_PER_FACTORISATION``)."""
+def uses_krylov(problem: _hb.HBProblem) -> bool:
+    """Whether ``problem``'s Newton and implicit-derivative solves go through
+    :class:`KrylovHB`: ``settings.linear_solver`` ``"krylov"``, or ``"auto"`` where
+    :func:`krylov_cheaper`."""
     setting = problem.settings.linear_solver
     if setting != "auto":
         return setting == "krylov"
     C, n = problem.shape
     r = n - (0 if problem.mesh_null is None else problem.mesh_null.shape[1])
-    return krylov_cheaper(C, n, r, problem.system.n_meshes, problem.n_time, solves)
+    return krylov_cheaper(C, n, r, problem.system.n_meshes, problem.n_time)
 
 
 def linear_solver(problem: _hb.HBProblem) -> lx.AbstractLinearSolver:
     """The lineax solver for ``problem``'s Jacobian (:func:`uses_krylov`):
-    :class:`KrylovHB` or :class:`~gearjax._engine.linear_solver.CondensedLU`."""
-    return KrylovHB() if uses_krylov(problem) else CondensedLU()
+    :class:`KrylovHB` (with the LU as its fallback where ``"auto"`` chose it) or
+    :class:`~gearjax._engine.linear_solver.CondensedLU`."""
+    if not uses_krylov(problem):
+        return CondensedLU()
+    return KrylovHB(fallback=problem.settings.linear_solver == "auto")
 

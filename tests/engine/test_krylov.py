@@ -2,6 +2,7 @@
 factorisation, on the paper gear with tooth separation and on a two-group torus."""
 
 import dataclasses
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -186,3 +187,31 @@ def test_truncation_checks_past_the_factorisation_bound_are_matrix_free():
     assert _harmonics.solves_by_krylov(system, K2)
     assert _harmonics.check_affordable(system, (8, 6, 12), 0) is None
     assert _harmonics.krylov_memory_bytes(system, K2) < _harmonics.memory_bytes(system, K2) / 5
+
+
+def test_a_solve_the_preconditioner_cannot_carry_falls_back_to_the_factorisation():
+    """tests/data/three_stage.toml at 1 kHz (K = 64): its stiffness variation couples the
+    harmonics so strongly that BiCGStab from the time-invariant preconditioner breaks
+    down (forced, it says so in its result); the default's solver then solves with the
+    condensed LU at the same point, and Newton converges as with the LU."""
+    import math
+    import pathlib
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", gj.GeometryWarning)
+        train = gj.load_train(pathlib.Path(__file__).parents[1] / "data" / "three_stage.toml")
+    system = gj.assemble(train)
+    system = dataclasses.replace(system, backlash=jnp.zeros_like(system.backlash))
+    problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=64))
+    assert _krylov.uses_krylov(problem)
+    omega = jnp.asarray(2 * math.pi * 1000.0 / 7)
+    y = _hb.linear_guess(problem, omega)
+    b = jnp.asarray(np.random.default_rng(3).normal(size=y.size))
+    J = _ls.HBJacobian(problem, y, omega)
+    exact = lx.linear_solve(J, b, _ls.CondensedLU()).value
+    forced = lx.linear_solve(J, b, _krylov.KrylovHB(), throw=False)
+    assert forced.result != lx.RESULTS.successful
+    sol = lx.linear_solve(J, b, _krylov.linear_solver(problem), throw=False)
+    assert sol.result == lx.RESULTS.successful and bool(sol.stats["fallback"])
+    np.testing.assert_allclose(sol.value, exact, atol=1e-10 * float(jnp.max(jnp.abs(exact))))
+    assert bool(_newton.solve_hb(problem, omega).converged)
