@@ -109,10 +109,17 @@ def orders_text(K) -> str:
 
 def settings_for(system: System, K, **fields) -> _hb.HarmonicBalance:
     """The harmonic-balance settings of orders ``K`` on ``system`` (the torus truncation
-    set :data:`TORUS_TRUNCATION` where ``K`` is a tuple)."""
+    set :data:`TORUS_TRUNCATION` where ``K`` is a tuple). Where the solves at ``K`` are
+    matrix-free (:func:`solves_by_krylov`) and a factorisation would not fit in
+    ``MEMORY_SHARE`` of the available memory (:func:`memory_bytes`), ``linear_solver`` is
+    ``"krylov"`` unless given: no fallback to a factorisation that cannot run (a solve
+    that does not converge is reported as such)."""
     K = as_orders(K)
     if isinstance(K, tuple):
         fields.setdefault("truncation", TORUS_TRUNCATION)
+    if "linear_solver" not in fields and solves_by_krylov(system, K) and (
+            memory_bytes(system, K) > MEMORY_SHARE * available_memory()):
+        fields["linear_solver"] = "krylov"
     return _hb.HarmonicBalance(n_harmonics=K, **fields)
 
 

@@ -191,3 +191,19 @@ def test_a_fixed_K_is_checked_kept_and_warned_about(paper_train_h1):
     assert said == ["sweep: truncation check, segment 1 of 1 at 2400.0 Hz: K = 8 against 16"]
     (check,) = json.loads(fixed.dataset.attrs["solver"])["truncation"]
     assert check["K"] == 8 and check["K_check"] == 16 and check["change"] > 0.005
+
+
+def test_a_problem_whose_factorisation_does_not_fit_solves_matrix_free_without_fallback(
+        train, monkeypatch):
+    """Where the solves are matrix-free and a factorisation would not fit in the memory
+    share, the settings ask for Krylov outright (a solve that does not converge is
+    reported, never handed to an LU that cannot run); with the memory to factorise, the
+    default's fallback stays."""
+    system = gj.assemble(train)
+    assert _harmonics.solves_by_krylov(system, 128)
+    assert _harmonics.settings_for(system, 128).linear_solver == "auto"
+    small = _harmonics.memory_bytes(system, 128) // 4  # under twice the factorisation
+    monkeypatch.setattr(_harmonics, "available_memory", lambda: small)
+    assert _harmonics.settings_for(system, 128).linear_solver == "krylov"
+    assert _harmonics.settings_for(system, 128, linear_solver="lu").linear_solver == "lu"
+    assert _harmonics.settings_for(system, 32).linear_solver == "auto"  # the LU's own size
