@@ -75,17 +75,15 @@ class PairPreconditioner(lx.AbstractLinearOperator):
     def mv(self, vector):
         C, n = self.row_scale.shape
         P = self.pair_inverse.shape[0]
+        mean, pairs = self.mean_inverse, self.pair_inverse
+        scale_in, scale_out = self.row_scale, 1.0 / self.x_scale
         if self.transposed:  # S_out B^-T S_in^-1
-            V = vector.reshape(C, n) / self.x_scale
-            mean = self.mean_inverse.T @ V[0]
-            pairs = jnp.einsum("pji,pj->pi", self.pair_inverse, V[1:].reshape(P, 2 * n))
-            Z = jnp.concatenate([mean[None], pairs.reshape(2 * P, n)])
-            return (Z * self.row_scale).reshape(-1)
-        V = vector.reshape(C, n) * self.row_scale
-        mean = self.mean_inverse @ V[0]
-        pairs = jnp.einsum("pij,pj->pi", self.pair_inverse, V[1:].reshape(P, 2 * n))
-        Z = jnp.concatenate([mean[None], pairs.reshape(2 * P, n)])
-        return (Z / self.x_scale).reshape(-1)
+            mean, pairs = mean.T, jnp.swapaxes(pairs, 1, 2)
+            scale_in, scale_out = scale_out, scale_in
+        V = vector.reshape(C, n) * scale_in
+        Z = jnp.concatenate([(mean @ V[0])[None], jnp.einsum(
+            "pij,pj->pi", pairs, V[1:].reshape(P, 2 * n)).reshape(2 * P, n)])
+        return (Z * scale_out).reshape(-1)
 
     def as_matrix(self):
         eye = jnp.eye(self.in_size())

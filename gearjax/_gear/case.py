@@ -129,13 +129,14 @@ def torus_fields(case: GearCase) -> dict | None:
             "truncation": TORUS_TRUNCATION, "return_turns": q, "return_drift": d}
 
 
-def check_floating(train: Train, g: Gear, system: System) -> None:
-    """Refuse backlash where the gear floats in its clearances (``floating_reason``: no
-    mesh with backlash carries a static load the harmonic balance resolves).
+def check_floating(train: Train, g: Gear, system: System, F_static) -> None:
+    """Refuse backlash where the gear floats in its clearances (``floating_reason`` of
+    the static mesh forces ``F_static`` (N): no mesh with backlash carries a static load
+    the harmonic balance resolves).
 
     **Raises:** ``TrainError`` naming ``gears.<name>.input_torque``.
     """
-    reason = floating_reason(system)
+    reason = floating_reason(system, F_static)
     if reason is not None:
         raise fail(train.source, f"gears.{g.name}.input_torque", float(g.input_torque),
                    f"{reason}: give the gear an input torque, or solve with `linear`")
@@ -173,7 +174,9 @@ def gear_case(train: Train, gear: str | None = None, stage: str | None = None,
         system = dataclasses.replace(system, backlash=jnp.zeros_like(system.backlash))
     else:
         check_unloaded(train, g, kin, system)
-        check_floating(train, g, system)
+    F_static = np.asarray(static_mesh_forces(system))
+    if not linear:
+        check_floating(train, g, system, F_static)
     return GearCase(train=train, gear=g, kin=kin, mu=tuple(mu), stage=ref,
                     mu_ref=mu[train.stage_ids.index(ref)], system=system, linear=linear,
-                    F_static=np.asarray(static_mesh_forces(system)), layout=layout)
+                    F_static=F_static, layout=layout)

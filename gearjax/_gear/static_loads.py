@@ -23,17 +23,18 @@ harmonic balance's unknowns are in units of the largest backlash, resolved to Ne
 tolerance (``HarmonicBalance.rtol``)."""
 
 
-def floating_reason(system: System) -> str | None:
-    """Why ``system`` floats in its clearances, in words: every mesh with backlash has a
-    static deflection (``|F_static| / kbar``) below :data:`FLOAT_RESOLUTION` of its
-    backlash (no input torque, or one too small to press any tooth pair together as far
-    as the harmonic balance resolves). ``None`` where some mesh with backlash carries
-    load, or none has backlash."""
+def floating_reason(system: System, force) -> str | None:
+    """Why ``system`` floats in its clearances, in words, from its static mesh forces
+    ``force`` ``(m,)`` (N; ``static_deflection``): every mesh with backlash has a static
+    deflection (``|force| / kbar``) below :data:`FLOAT_RESOLUTION` of its backlash (no
+    input torque, or one too small to press any tooth pair together as far as the
+    harmonic balance resolves). ``None`` where some mesh with backlash carries load, or
+    none has backlash."""
     back = np.asarray(system.backlash)
     rows = back > 0
     if not np.any(rows):
         return None
-    force = np.asarray(static_deflection(system)[1])
+    force = np.asarray(force)
     deflection = np.abs(force) / np.asarray(system.kbar)
     if np.any(deflection[rows] > FLOAT_RESOLUTION * back[rows]):
         return None
@@ -74,11 +75,11 @@ def static_loads(train: Train, gear: str | None = None) -> StaticLoads:
     ``RangeWarning`` where the gear floats in its clearances (:func:`floating_reason`)."""
     g = train.gear(gear)
     system = assemble(train, g.name, kinematics(train, g.name))
-    reason = floating_reason(system)
+    x, F = (np.asarray(a) for a in static_deflection(system))
+    reason = floating_reason(system, F)
     if reason is not None:
         warn_range(field_message(train.source, f"gears.{g.name}.input_torque",
                                  float(g.input_torque), reason))
-    x, F = (np.asarray(a) for a in static_deflection(system))
     mesh_force = dict(zip(system.mesh_labels, F.tolist()))
     mesh_torque = dict(zip(system.mesh_labels, (np.asarray(system.mesh_radius) * F).tolist()))
     f = np.asarray(system.f_mean)
