@@ -165,9 +165,29 @@ from ._gear.train import (
     Coupling as Coupling,
     Gear as Gear,
     Housing as Housing,
+    PerGear as PerGear,
     Stage as Stage,
+    TipRelief as TipRelief,
+    ToothGeometry as ToothGeometry,
     Train as Train,
 )
+from ._gear.involute import (
+    MeshContact as MeshContact,
+    ToothForm as ToothForm,
+    mesh_contact as mesh_contact,
+)
+from ._gear.iso6336 import IsoStiffness as IsoStiffness, iso_stiffness as iso_stiffness
+from ._gear.tooth_stiffness import (
+    hertz_compliance as hertz_compliance,
+    tooth_compliance as tooth_compliance,
+)
+from ._gear.mesh_stiffness import (
+    MeshCycle as MeshCycle,
+    MeshWave as MeshWave,
+    mesh_cycle as mesh_cycle,
+    mesh_wave as mesh_wave,
+)
+from ._gear.mesh_report import MeshSide as MeshSide, mesh_report as mesh_report
 from ._gear.validate import (
     geometry_warnings as geometry_warnings,
     validate_train as validate_train,
@@ -184,6 +204,7 @@ from ._gear.case import GearCase as GearCase, gear_case as gear_case
 from ._plot.figures import (
     campbell_figure as campbell_figure,
     design_figure as design_figure,
+    mesh_cycle_figure as mesh_cycle_figure,
     recheck_figure as recheck_figure,
     response_figure as response_figure,
     separation_figure as separation_figure,

@@ -343,6 +343,10 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--free", nargs="+", required=True, metavar="PATH",
                    help="TOML paths to fit, e.g. 1.inertia.sun 2.planet_mass")
     c.add_argument("--out-train", metavar="FILE.toml", help="write the calibrated train")
+    c = command("mesh", _mesh_cmd, "contact, stiffness and transmission error of a stage's "
+                "meshes over one mesh cycle")
+    c.add_argument("--stage", default=None, metavar="ID", help="stage id (default: every stage)")
+    c.add_argument("--plot", metavar="FIG", help="write the mesh cycle of the stage to FIG")
     c = command("sweep", _sweep_cmd, "frequency response by harmonic balance and continuation")
     c.add_argument("--from", dest="from_hz", type=float, default=2000.0, metavar="HZ",
                    help="start, reference-stage mesh frequency (Hz); direction = order")
@@ -491,6 +495,7 @@ def _point_flags(c: argparse.ArgumentParser) -> None:
 
 def _info(args, train, notes) -> int:
     from ._gear.frequency_groups import MAX_MULTIPLIER
+    from ._gear.mesh_report import mesh_report
     from ._gear.kinematics import kinematics
     from ._gear.phasing import phasing_report
     from ._gear.static_loads import static_loads
@@ -536,6 +541,7 @@ def _info(args, train, notes) -> int:
         "torque_balance": loads.balance,
         "phasing": phasing,
         "harmonics": _harmonics_info(train, g.name, kin),
+        "meshes": [m.as_dict() for m in mesh_report(train, g.name)],
         **_groups_info(train, kin, args.input_rpm),
         "warnings": notes,
     }
@@ -570,6 +576,8 @@ def _info(args, train, notes) -> int:
         for k, grp in enumerate(out["frequency_groups"]):
             print(f"  {k + 1}: base {grp['base_hz']:.2f} Hz: " + ", ".join(
                 f"{m} x{mu}" for m, mu in zip(grp["members"], grp["multipliers"])))
+    print("\nmeshes (mean stiffness at the static load; harmonics relative to the mean):")
+    _print_meshes(out["meshes"])
     print(f"solver: {out['solver_plan']}")
     h = out["harmonics"]
     if h is not None:
@@ -577,6 +585,52 @@ def _info(args, train, notes) -> int:
               f"({h['floor_rule']}); the first choice of K reaches {h['cutoff_hz']:.0f} Hz "
               f"(5/3 of the highest mesh mode, {h['mesh_mode_hz']:.0f} Hz); a sweep checks "
               "it against 2K")
+    return EXIT_OK
+
+
+def _print_meshes(meshes: list[dict]) -> None:
+    for m in meshes:
+        amps = " ".join(f"{h['amplitude']:.3f}" for h in m["harmonics"])
+        print(f"  {m['stage']}.{m['side']:<4} {m['source']:<22} contact ratio "
+              f"{m['contact_ratio']:.3f}  mean {m['mean_stiffness']:.4g} N/m  "
+              f"harmonics {amps or '-'} (beyond: {100 * m['truncation']:.1f}% RMS)")
+        if m["iso_mesh"] is not None:
+            print(f"  {'':>6} operating pressure angle {m['pressure_angle_deg']:.3f} deg, centre "
+                  f"distance {m['centre_distance_mm']:.4f} mm, load {m['load']:.1f} N; "
+                  f"ISO 6336-1 c_gamma_alpha b {m['iso_mesh']:.4g} N/m "
+                  f"({100 * m['iso_difference']:+.1f}% from it)")
+        if m["relief_te_um"]:
+            print(f"  {'':>6} tip relief transmission error (um per harmonic): "
+                  + " ".join(f"{a:.3f}" for a in m["relief_te_um"]))
+
+
+def _mesh_cmd(args, train, notes) -> int:
+    from ._gear.mesh_report import mesh_report
+
+    g = train.gear(args.gear)
+    if args.stage is not None and args.stage not in train.stage_ids:
+        raise fail("command line", "--stage", args.stage,
+                   f"no such stage; stages are {', '.join(train.stage_ids)}")
+    if args.plot and args.stage is None and len(train.stages) > 1:
+        raise fail("command line", "--plot", args.plot,
+                   "name the stage to draw with --stage ID")
+    meshes = [m.as_dict() for m in mesh_report(train, g.name)
+              if args.stage is None or m.stage == args.stage]
+    out = {"train": train.name, "gear": g.name, "meshes": meshes, "warnings": notes}
+    if args.plot:
+        from ._plot.figures import mesh_cycle_figure
+
+        stage = train.stage(args.stage or train.stage_ids[0])
+        loads = {m["side"]: m["load"] for m in meshes if m["stage"] == stage.id}
+        with _atomic(args.plot) as fig:
+            mesh_cycle_figure(stage, loads, title=f"{train.name}: stage {stage.id}, "
+                              f"gear {g.name}").savefig(fig, dpi=120)
+    if args.json:
+        return _emit(out)
+    print(f"{train.name}: gear {g.name!r}, meshes (mean stiffness at the static load):")
+    _print_meshes(meshes)
+    if args.plot:
+        print(f"mesh cycle written to {args.plot}")
     return EXIT_OK
 
 

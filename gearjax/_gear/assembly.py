@@ -19,9 +19,15 @@ import numpy as np
 from .._config import require_x64
 from .frequency_groups import TorusLayout
 from .kinematics import Kinematics, kinematics
+from .mesh_stiffness import mesh_wave, planet_load
 from .phasing import harmonic_phases, stiffness_amplitudes
 from .._engine.system import System
 from .train import MEMBERS, Train, member_index, member_paths
+
+
+def _derived(stage) -> bool:
+    """The stage's stiffness wave comes from its tooth geometry."""
+    return stage.geometry is not None and stage.geometry.derives_stiffness
 
 
 def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = None,
@@ -46,7 +52,8 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
     n = train.n_dof
     H = train.stiffness_harmonics
     H_e = max([s.transmission_error.sun.shape[0] for s in train.stages]
-              + [s.transmission_error.ring.shape[0] for s in train.stages])
+              + [s.transmission_error.ring.shape[0] for s in train.stages]
+              + [H for s in train.stages if _derived(s) and s.geometry.relieved])
     M = jnp.zeros((n, n))
     W_rows, kbar, k_cos, k_sin, back, damp, te_cos, te_sin, radius = ([] for _ in range(9))
     mesh_mu, mesh_angle, labels, groups, sides, planets = [], [], [], [], [], []
@@ -77,8 +84,15 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
             ("sun", i_s, r_s, I.sun, 1.0, phases_s),
             ("ring", i_r, r_r, I.ring, -1.0, phases_r),
         ):
-            k_mean = getattr(s.mesh_stiffness, side)
-            amp = stiffness_amplitudes(getattr(s.contact_ratio, side), H)
+            if _derived(s):
+                wave = mesh_wave(s, side, H, load=planet_load(s, sk, g))
+                k_mean, k_a, k_b = wave.mean, wave.k_cos, wave.k_sin
+                relief_a = jnp.zeros(H_e).at[:H].set(wave.te_cos)
+                relief_b = jnp.zeros(H_e).at[:H].set(wave.te_sin)
+            else:
+                k_mean = getattr(s.mesh_stiffness, side)
+                k_a = stiffness_amplitudes(getattr(s.contact_ratio, side), H)
+                k_b = relief_a = relief_b = 0.0
             te = getattr(s.transmission_error, side)
             te_amp = jnp.zeros(H_e).at[: te.shape[0]].set(te[:, 0])
             te_phase = jnp.zeros(H_e).at[: te.shape[0]].set(jnp.deg2rad(te[:, 1]))
@@ -90,11 +104,14 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
                 W_rows.append(row)
                 kbar.append(k_mean)
                 ph = phases[i, :H]
-                k_cos.append(on * amp * jnp.cos(ph))
-                k_sin.append(-on * amp * jnp.sin(ph))
+                k_cos.append(on * (k_a * jnp.cos(ph) + k_b * jnp.sin(ph)))
+                k_sin.append(on * (k_b * jnp.cos(ph) - k_a * jnp.sin(ph)))
                 ph_e = phases[i, :H_e] + te_phase
-                te_cos.append(on * te_amp * jnp.cos(ph_e))
-                te_sin.append(-on * te_amp * jnp.sin(ph_e))
+                ph_r = phases[i, :H_e]
+                te_cos.append(on * (te_amp * jnp.cos(ph_e)
+                                    + relief_a * jnp.cos(ph_r) + relief_b * jnp.sin(ph_r)))
+                te_sin.append(on * (-te_amp * jnp.sin(ph_e)
+                                    + relief_b * jnp.cos(ph_r) - relief_a * jnp.sin(ph_r)))
                 back.append(getattr(s.half_backlash, side))
                 damp.append(c)
                 radius.append(r_j)

@@ -49,6 +49,14 @@ STAGE_TABLES = {
 }
 """Stage keys that are tables of numbers, with their sub-keys."""
 
+GEOMETRY_SCALARS = {"face_width_mm": "face_width_mm", "addendum_coefficient": "addendum",
+                    "dedendum_coefficient": "dedendum",
+                    "root_radius_coefficient": "root_radius",
+                    "youngs_modulus": "youngs_modulus", "poisson_ratio": "poisson_ratio"}
+"""Tooth-geometry keys that are one number each, and their field in ``ToothGeometry``."""
+
+GEARS = ("sun", "planet", "ring")
+
 _STAGE_NOT_CONTINUOUS = {
     "id": "the stage id is a name",
     "teeth": "tooth counts are integers (structure), not continuous parameters",
@@ -127,8 +135,12 @@ def continuous_paths(train: Train, gear: str | None = None, *, linear: bool = Fa
         for key in ("module_mm", "pressure_angle_deg", "carrier_radius_mm"):
             if getattr(s, key) is not None:
                 out.append(f + key)
-        out += [f"{f}contact_ratio.{k}" for k in STAGE_TABLES["contact_ratio"]]
-        out += [f"{f}mesh_stiffness.{k}" for k in STAGE_TABLES["mesh_stiffness"]]
+        if _derived(s):
+            out += [f + key for key in GEOMETRY_SCALARS]
+            out += [f"{f}profile_shift.{g}" for g in GEARS]
+        else:
+            out += [f"{f}contact_ratio.{k}" for k in STAGE_TABLES["contact_ratio"]]
+            out += [f"{f}mesh_stiffness.{k}" for k in STAGE_TABLES["mesh_stiffness"]]
         out.append(f + "mesh_damping_ratio")
         out += [f"{f}half_backlash.{k}" for k in STAGE_TABLES["half_backlash"]]
         out += [f + "sun_ring_phase_deg", f + "stage_phase_deg"]
@@ -142,6 +154,10 @@ def continuous_paths(train: Train, gear: str | None = None, *, linear: bool = Fa
     return [p for p in out if keep(p)]
 
 
+def _derived(stage) -> bool:
+    return stage.geometry is not None and stage.geometry.derives_stiffness
+
+
 def _affects(train: Train, gear: str, linear: bool) -> Callable[[str], bool]:
     """``path -> bool``: whether ``path`` enters the assembled system of ``gear``."""
 
@@ -153,7 +169,8 @@ def _affects(train: Train, gear: str, linear: bool) -> Callable[[str], bool]:
     members = member_paths(train)
     dragged = any(kin.speeds.get(p, 0) != 0 and p not in (g.input, g.output)
                   and p not in g.brakes for p in members)
-    phasing = ("contact_ratio", "sun_ring_phase_deg", "stage_phase_deg", "planet_angles_deg")
+    phasing = ("contact_ratio", "sun_ring_phase_deg", "stage_phase_deg", "planet_angles_deg",
+               "profile_shift", *GEOMETRY_SCALARS)
 
     def keep(path: str) -> bool:
         parts = path.split(".")
@@ -224,6 +241,11 @@ def _stage_leaf(train: Train, k: int, parts: list[str], bad) -> Leaf:
     if len(parts) < 2:
         raise bad(f"name a key of stage {s.id!r}: {keys}")
     key = parts[1]
+    if key in GEOMETRY_SCALARS or key == "profile_shift":
+        return _geometry_leaf(s, k, parts, bad)
+    if key in ("contact_ratio", "mesh_stiffness") and _derived(s):
+        raise bad(f"stage {s.id!r} derives {key} from its tooth geometry; vary "
+                  f"{s.id}.face_width_mm or {s.id}.profile_shift.sun|planet|ring instead")
     if key in STAGE_SCALARS:
         if len(parts) != 2:
             raise bad(f"{s.id}.{key} is one number; write the path as {s.id}.{key}")
@@ -257,6 +279,24 @@ def _stage_leaf(train: Train, k: int, parts: list[str], bad) -> Leaf:
     if key in _STAGE_NOT_CONTINUOUS:
         raise bad(f"{_STAGE_NOT_CONTINUOUS[key]}; continuous keys of a stage are {keys}")
     raise bad(f"stage {s.id!r} has no key {key!r}; continuous keys of a stage are {keys}")
+
+
+def _geometry_leaf(s, k: int, parts: list[str], bad) -> Leaf:
+    key = parts[1]
+    if s.geometry is None:
+        raise bad(f"stage {s.id!r} has no tooth geometry (it sets no face_width_mm)")
+    if not s.geometry.derives_stiffness:
+        raise bad(f"stage {s.id!r} gives mesh_stiffness and contact_ratio, so its tooth "
+                  "geometry is only checked and changes nothing")
+    if key == "profile_shift":
+        if len(parts) != 3 or parts[2] not in GEARS:
+            raise bad(f"{s.id}.profile_shift has sub-keys {', '.join(GEARS)} "
+                      f"(e.g. {s.id}.profile_shift.sun)")
+        return Leaf(".".join(parts), _getter(("stages", k, "geometry", "profile_shift",
+                                              parts[2])))
+    if len(parts) != 2:
+        raise bad(f"{s.id}.{key} is one number; write the path as {s.id}.{key}")
+    return Leaf(".".join(parts), _getter(("stages", k, "geometry", GEOMETRY_SCALARS[key])))
 
 
 def _coupling_leaf(train: Train, parts: list[str], bad) -> Leaf:

@@ -14,6 +14,7 @@ import tomllib
 from importlib import resources
 from pathlib import Path
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import tomli_w
@@ -24,12 +25,17 @@ from .train import (
     Gear,
     Housing,
     Inertia,
+    PerGear,
     Stage,
     SunRing,
     Teeth,
     Train,
+    TipRelief,
+    ToothGeometry,
     TransmissionError,
 )
+from .mesh_stiffness import geometric_stiffness
+from .tooth_rules import check_tooth_geometry
 from .validate import check_ranges, validate_train
 
 BUNDLED_EXAMPLE = "al_shyyab_2009.toml"
@@ -39,7 +45,15 @@ _TOP_KEYS = {"name", "stiffness_harmonics", "phasing", "mesh_damping", "stages",
 _STAGE_KEYS = {"id", "teeth", "module_mm", "pressure_angle_deg", "planet_angles_deg",
                "carrier_radius_mm", "contact_ratio", "mesh_stiffness", "mesh_damping_ratio",
                "half_backlash", "sun_ring_phase_deg", "stage_phase_deg", "transmission_error",
-               "inertia", "planet_mass"}
+               "inertia", "planet_mass", *("face_width_mm", "profile_shift",
+               "addendum_coefficient", "dedendum_coefficient", "root_radius_coefficient",
+               "youngs_modulus", "poisson_ratio", "tip_relief")}
+_GEOMETRY_DEFAULTS = {"addendum_coefficient": 1.0, "dedendum_coefficient": 1.25,
+                      "root_radius_coefficient": 0.38, "youngs_modulus": 206e9,
+                      "poisson_ratio": 0.3}
+"""Tooth-geometry keys beside ``face_width_mm`` and their defaults (ISO 53 profile A,
+steel)."""
+_GEARS = ("sun", "planet", "ring")
 _COUPLING_KEYS = {"members", "stiffness", "id", "gears"}
 _HOUSING_KEYS = {"braked", "free"}
 _GEAR_KEYS = {"input", "output", "brakes", "input_torque", "input_torque_ripple", "drag_torque",
@@ -188,15 +202,20 @@ def _stage(r: _Reader, raw, i: int) -> Stage:
     carrier = None
     if "carrier_radius_mm" in raw:
         carrier = r.number(raw, "carrier_radius_mm", f + "carrier_radius_mm", low=0.0, strict=True)
-    return Stage(
+    geometry = _geometry(r, raw, f, teeth, module, pressure)
+    derived = geometry is not None and geometry.derives_stiffness
+    unknown = SunRing(sun=jnp.asarray(jnp.nan), ring=jnp.asarray(jnp.nan))
+    stage = Stage(
         id=sid,
         teeth=teeth,
         module_mm=module,
         pressure_angle_deg=pressure,
         planet_angles_deg=jnp.asarray(angles),
         carrier_radius_mm=carrier,
-        contact_ratio=r.sun_ring(raw, "contact_ratio", f, low=1.0, rule="must be >= 1"),
-        mesh_stiffness=r.sun_ring(raw, "mesh_stiffness", f, low=0.0, strict=True),
+        contact_ratio=unknown if derived else r.sun_ring(raw, "contact_ratio", f, low=1.0,
+                                                         rule="must be >= 1"),
+        mesh_stiffness=unknown if derived else r.sun_ring(raw, "mesh_stiffness", f, low=0.0,
+                                                          strict=True),
         mesh_damping_ratio=r.number(raw, "mesh_damping_ratio", f + "mesh_damping_ratio",
                                     default=0.04, low=0.0),
         half_backlash=r.sun_ring(raw, "half_backlash", f, low=0.0, default=0.0),
@@ -209,7 +228,93 @@ def _stage(r: _Reader, raw, i: int) -> Stage:
             for k in ("sun", "ring", "carrier", "planet")
         }),
         planet_mass=r.number(raw, "planet_mass", f + "planet_mass", low=0.0, strict=True),
+        geometry=geometry,
     )
+    if geometry is None:
+        return stage
+    check_tooth_geometry(stage, r.source)  # before any stiffness is derived from it
+    return with_geometric_stiffness(stage) if derived else stage
+
+
+def _geometry(r: _Reader, raw, f: str, teeth: Teeth, module, pressure) -> ToothGeometry | None:
+    """The tooth geometry, or ``None`` without ``face_width_mm``."""
+    others = [k for k in (*_GEOMETRY_DEFAULTS, "profile_shift", "tip_relief") if k in raw]
+    if "face_width_mm" not in raw:
+        if others:
+            raise r.fail(f + others[0], raw[others[0]],
+                         "tooth geometry needs face_width_mm in the same stage")
+        return None
+    given = [k for k in ("contact_ratio", "mesh_stiffness") if k in raw]
+    if len(given) == 1:
+        missing = ({"contact_ratio", "mesh_stiffness"} - set(given)).pop()
+        raise r.fail(f + missing, None,
+                     f"is required with {given[0]} (both are then used, the geometry only "
+                     "checked), or leave out both to derive them from the geometry")
+    width = r.number(raw, "face_width_mm", f + "face_width_mm", low=0.0, strict=True)
+    shift = raw.get("profile_shift", {})
+    r.table(shift, f + "profile_shift")
+    r.keys(shift, set(_GEARS), f + "profile_shift")
+    coef = {k: r.number(raw, k, f + k, default=v, low=0.0, strict=k != "root_radius_coefficient")
+            for k, v in _GEOMETRY_DEFAULTS.items() if k != "poisson_ratio"}
+    nu = r.number(raw, "poisson_ratio", f + "poisson_ratio", default=0.3, low=0.0)
+    if not float(nu) < 0.5:
+        raise r.fail(f + "poisson_ratio", float(nu), "must be below 0.5")
+    amounts, starts = _tip_relief(r, raw, f, teeth, module, pressure)
+    return ToothGeometry(
+        face_width_mm=width,
+        profile_shift=PerGear(**{g: r.number(shift, g, f"{f}profile_shift.{g}", default=0.0)
+                                 for g in _GEARS}),
+        addendum=coef["addendum_coefficient"],
+        dedendum=coef["dedendum_coefficient"],
+        root_radius=coef["root_radius_coefficient"],
+        youngs_modulus=coef["youngs_modulus"],
+        poisson_ratio=nu,
+        tip_relief=TipRelief(amount_um=PerGear(**amounts), start_diameter_mm=PerGear(**starts)),
+        derives_stiffness=not given,
+        relieved=any(float(a) > 0 for a in amounts.values()),
+    )
+
+
+def _tip_relief(r: _Reader, raw, f: str, teeth: Teeth, module, pressure):
+    """Relief amount (um) and start diameter (mm) per gear; a start given as a roll
+    angle ``xi`` (deg) is the diameter ``d_b sqrt(1 + xi^2)``."""
+    table = raw.get("tip_relief", {})
+    r.table(table, f + "tip_relief")
+    r.keys(table, set(_GEARS), f + "tip_relief")
+    amounts, starts = {}, {}
+    for g in _GEARS:
+        entry = table.get(g, {})
+        field = f"{f}tip_relief.{g}"
+        r.table(entry, field)
+        r.keys(entry, {"amount_um", "start_diameter_mm", "start_roll_deg"}, field)
+        amounts[g] = r.number(entry, "amount_um", field + ".amount_um", default=0.0, low=0.0)
+        base = float(module) * getattr(teeth, g) * math.cos(math.radians(float(pressure)))
+        ways = [k for k in ("start_diameter_mm", "start_roll_deg") if k in entry]
+        if len(ways) == 2:
+            raise r.fail(field + ".start_roll_deg", entry["start_roll_deg"],
+                         "give the start as start_diameter_mm or start_roll_deg, not both")
+        if not ways:
+            if float(amounts[g]) > 0:
+                raise r.fail(field + ".start_diameter_mm", None,
+                             "is required with amount_um (or start_roll_deg)")
+            starts[g] = jnp.asarray(base)
+        elif ways[0] == "start_diameter_mm":
+            starts[g] = r.number(entry, "start_diameter_mm", field + ".start_diameter_mm",
+                                 low=0.0, strict=True)
+        else:
+            roll = r.number(entry, "start_roll_deg", field + ".start_roll_deg", low=0.0)
+            starts[g] = jnp.asarray(base * math.sqrt(1.0 + math.radians(float(roll)) ** 2))
+    return amounts, starts
+
+
+def with_geometric_stiffness(stage: Stage) -> Stage:
+    """``stage`` with ``contact_ratio`` and ``mesh_stiffness`` set to the values its
+    tooth geometry gives (unloaded mean stiffness, geometric contact ratio)."""
+    values = {side: geometric_stiffness(stage, side) for side in ("sun", "ring")}
+    return eqx.tree_at(
+        lambda s: (s.contact_ratio, s.mesh_stiffness), stage,
+        (SunRing(**{k: v[1] for k, v in values.items()}),
+         SunRing(**{k: v[0] for k, v in values.items()})))
 
 
 def _transmission_error(r: _Reader, raw, f: str) -> TransmissionError:
@@ -414,9 +519,13 @@ def train_to_dict(train: Train) -> dict:
         }
         if s.carrier_radius_mm is not None:
             d["carrier_radius_mm"] = _f(s.carrier_radius_mm)
-        for key in ("contact_ratio", "mesh_stiffness", "half_backlash"):
+        derived = s.geometry is not None and s.geometry.derives_stiffness
+        for key in ("half_backlash",) if derived else ("contact_ratio", "mesh_stiffness",
+                                                       "half_backlash"):
             pair = getattr(s, key)
             d[key] = {"sun": _f(pair.sun), "ring": _f(pair.ring)}
+        if s.geometry is not None:
+            d.update(_geometry_dict(s.geometry))
         d["mesh_damping_ratio"] = _f(s.mesh_damping_ratio)
         d["sun_ring_phase_deg"] = _f(s.sun_ring_phase_deg)
         d["stage_phase_deg"] = _f(s.stage_phase_deg)
@@ -456,6 +565,20 @@ def train_to_dict(train: Train) -> dict:
         gears[g.name] = d
     out["gears"] = gears
     return out
+
+
+def _geometry_dict(geo: ToothGeometry) -> dict:
+    d = {"face_width_mm": _f(geo.face_width_mm),
+         "profile_shift": {g: _f(getattr(geo.profile_shift, g)) for g in _GEARS}}
+    for key, value in zip(_GEOMETRY_DEFAULTS, (geo.addendum, geo.dedendum, geo.root_radius,
+                                                geo.youngs_modulus, geo.poisson_ratio)):
+        d[key] = _f(value)
+    relief = {g: {"amount_um": _f(getattr(geo.tip_relief.amount_um, g)),
+                  "start_diameter_mm": _f(getattr(geo.tip_relief.start_diameter_mm, g))}
+              for g in _GEARS if _f(getattr(geo.tip_relief.amount_um, g)) > 0}
+    if relief:
+        d["tip_relief"] = relief
+    return d
 
 
 def dumps_train(train: Train) -> str:

@@ -56,11 +56,56 @@ class Inertia(eqx.Module):
     planet: Float[Array, ""]
 
 
+class PerGear(eqx.Module):
+    """A value per gear of a stage: sun, planet, ring."""
+
+    sun: Float[Array, ""]
+    planet: Float[Array, ""]
+    ring: Float[Array, ""]
+
+
+class TipRelief(eqx.Module):
+    """Linear tip relief per gear: ``amount_um`` (um) at the tip, growing linearly in
+    roll angle from the diameter ``start_diameter_mm`` (mm) to the tip. An amount of 0
+    means no relief on that gear.
+    """
+
+    amount_um: PerGear
+    start_diameter_mm: PerGear
+
+
+class ToothGeometry(eqx.Module):
+    """The tooth geometry of a stage's gears (train-file keys ``face_width_mm``,
+    ``profile_shift``, ``addendum_coefficient``, ``dedendum_coefficient``,
+    ``root_radius_coefficient``, ``youngs_modulus``, ``poisson_ratio``, ``tip_relief``).
+
+    Coefficients are of the module (ISO 53 basic rack: 1.0, 1.25, 0.38); the modulus is
+    in Pa. ``derives_stiffness`` (static): the file gives neither ``mesh_stiffness`` nor
+    ``contact_ratio``, so both, and the stiffness wave, come from this geometry
+    (:mod:`gearjax._gear.mesh_stiffness`); otherwise the geometry is only checked.
+    ``relieved`` (static): some gear has tip relief.
+    """
+
+    face_width_mm: Float[Array, ""]
+    profile_shift: PerGear
+    addendum: Float[Array, ""]
+    dedendum: Float[Array, ""]
+    root_radius: Float[Array, ""]
+    youngs_modulus: Float[Array, ""]
+    poisson_ratio: Float[Array, ""]
+    tip_relief: TipRelief
+    derives_stiffness: bool = eqx.field(static=True, default=True)
+    relieved: bool = eqx.field(static=True, default=False)
+
+
 class Stage(eqx.Module):
     """One simple planetary stage: sun, ring, carrier and ``N`` planets.
 
     Units are those of the train-file keys: ``module_mm`` in mm, angles in degrees,
-    stiffness in N/m, backlash in m, inertia in kg m^2, mass in kg.
+    stiffness in N/m, backlash in m, inertia in kg m^2, mass in kg. ``geometry`` is
+    ``None`` unless the file gives ``face_width_mm``; where it derives the stiffness,
+    ``contact_ratio`` and ``mesh_stiffness`` hold the geometric values (the unloaded
+    mean) for reports, and assembly derives the wave from ``geometry`` itself.
     """
 
     id: str = eqx.field(static=True)
@@ -78,6 +123,7 @@ class Stage(eqx.Module):
     transmission_error: TransmissionError
     inertia: Inertia
     planet_mass: Float[Array, ""]
+    geometry: ToothGeometry | None = None
 
     @property
     def n_planets(self) -> int:

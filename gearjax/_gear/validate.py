@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .tooth_rules import tooth_geometry_warnings
 from .._errors import fail, field_message, warn_geometry, warn_range
 from .kinematics import kinematics
 from .train import MEMBERS, Train
@@ -82,7 +83,9 @@ def geometry_warnings(train: Train) -> list[str]:
     where = train.source or train.name
     for s in train.stages:
         zs, zp, zr = s.teeth.sun, s.teeth.planet, s.teeth.ring
-        if zr != zs + 2 * zp:
+        if s.geometry is not None:  # the centre distance is checked with the profile shifts
+            out += tooth_geometry_warnings(s, where)
+        elif zr != zs + 2 * zp:
             gap = float(s.module_mm) * (zr - zs - 2 * zp) / 2
             out.append(
                 f"{where}: stage {s.id!r} teeth sun {zs}, planet {zp}, ring {zr}: concentricity "

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from .._gear.campbell import Campbell
+from .._gear.mesh_stiffness import mesh_cycle, rectangular_cycle
 from .save import clip_to_stable
 
 WHAT = {"rms": ("rms_force", "RMS mesh force (N)"), "dlf": ("dlf", "dynamic load factor"),
@@ -518,4 +519,43 @@ def recheck_figure(recheck, title: str = ""):
                            "(kHz)")
     fig.suptitle(title or f"re-check {recheck.band_hz[0]:g}-{recheck.band_hz[1]:g} Hz: fresh "
                  "sweeps with backlash and time integration", fontsize=10)
+    return fig
+
+
+# ------------------------------------------------------------------ mesh cycle
+
+
+def mesh_cycle_figure(stage, loads: dict, title: str = ""):
+    """Stiffness (top) and loaded transmission error (bottom) of ``stage``'s meshes over
+    one mesh cycle.
+
+    **Arguments:** ``loads``: side (``sun`` | ``ring``) -> static normal load of one
+    planet's mesh (N). Each side is drawn in its colour from its tooth geometry
+    (:func:`~gearjax._gear.mesh_stiffness.mesh_cycle`), with the rectangular wave of
+    the same mean and contact ratio (dashed) that it replaces; a stage without tooth
+    geometry draws its rectangular wave.
+    """
+    cycles = {side: (mesh_cycle(stage, side, load) if stage.geometry is not None
+                     else rectangular_cycle(stage, side, load))
+              for side, load in loads.items()}
+    fig, axes = _figure(7.0, 5.5, rows=2, sharex=True)
+    top, bottom = axes[0, 0], axes[1, 0]
+    for side, c in cycles.items():
+        x = (np.asarray(c.tau) / (2 * np.pi) + 0.5) % 1.0 - 0.5  # the zone in the middle
+        order = np.argsort(x)
+        x = x[order]
+        color = SIDE_COLORS[side]
+        top.plot(x, np.asarray(c.stiffness)[order] / 1e6, color=color,
+                 label=f"{side}-planet, geometry")
+        top.plot(x, np.asarray(c.rectangular)[order] / 1e6, color=color, ls="--", lw=1,
+                 label=f"{side}-planet, rectangular wave")
+        bottom.plot(x, np.asarray(c.loaded_te)[order] * 1e6, color=color,
+                    label=f"{side}-planet at {float(c.load):.0f} N")
+    top.set_ylabel("mesh stiffness (N/um)")
+    bottom.set_ylabel("loaded transmission error (um)")
+    bottom.set_xlabel("mesh cycle (0 = middle of the multiple-pair zone)")
+    top.legend(fontsize=8, loc="best")
+    bottom.legend(fontsize=8, loc="best")
+    if title:
+        fig.suptitle(title, fontsize=10)
     return fig

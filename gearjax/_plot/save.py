@@ -383,3 +383,4 @@ RESULT_PLOTS: dict[str, Callable] = {
     "optimize": _redraw_optimize,
 }
 """Drawing function per result kind: ``f(results_path, dataset, figure_path, what)``."""
+

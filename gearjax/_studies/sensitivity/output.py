@@ -19,7 +19,7 @@ def path_unit(path: str) -> str:
     return {"module_mm": "mm", "carrier_radius_mm": "mm", "pressure_angle_deg": "deg",
             "sun_ring_phase_deg": "deg", "stage_phase_deg": "deg", "planet_angles_deg": "deg",
             "mesh_stiffness": "N/m", "half_backlash": "m", "inertia": "kg m^2",
-            "planet_mass": "kg"}.get(key, "1")
+            "planet_mass": "kg", "face_width_mm": "mm", "youngs_modulus": "Pa"}.get(key, "1")
 
 
 def sensitivity_json(result: Sensitivity, top: int | None = None) -> dict:
