@@ -186,6 +186,8 @@ from ._gear.mesh_stiffness import (
     MeshWave as MeshWave,
     mesh_cycle as mesh_cycle,
     mesh_wave as mesh_wave,
+    stage_contacts as stage_contacts,
+    tooth_forms as tooth_forms,
 )
 from ._gear.mesh_report import MeshSide as MeshSide, mesh_report as mesh_report
 from ._gear.validate import (

@@ -25,11 +25,6 @@ from .._engine.system import System
 from .train import MEMBERS, Train, member_index, member_paths
 
 
-def _derived(stage) -> bool:
-    """The stage's stiffness wave comes from its tooth geometry."""
-    return stage.geometry is not None and stage.geometry.derives_stiffness
-
-
 def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = None,
              layout: TorusLayout | None = None) -> System:
     """The train in ``gear`` (default: the first) as a :class:`System`.
@@ -53,7 +48,7 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
     H = train.stiffness_harmonics
     H_e = max([s.transmission_error.sun.shape[0] for s in train.stages]
               + [s.transmission_error.ring.shape[0] for s in train.stages]
-              + [H for s in train.stages if _derived(s) and s.geometry.relieved])
+              + [H for s in train.stages if s.stiffness_from_geometry and s.geometry.relieved])
     M = jnp.zeros((n, n))
     W_rows, kbar, k_cos, k_sin, back, damp, te_cos, te_sin, radius = ([] for _ in range(9))
     mesh_mu, mesh_angle, labels, groups, sides, planets = [], [], [], [], [], []
@@ -84,7 +79,7 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
             ("sun", i_s, r_s, I.sun, 1.0, phases_s),
             ("ring", i_r, r_r, I.ring, -1.0, phases_r),
         ):
-            if _derived(s):
+            if s.stiffness_from_geometry:
                 wave = mesh_wave(s, side, H, load=planet_load(s, sk, g))
                 k_mean, k_a, k_b = wave.mean, wave.k_cos, wave.k_sin
                 relief_a = jnp.zeros(H_e).at[:H].set(wave.te_cos)

@@ -76,7 +76,7 @@ def mesh_report(train: Train, gear: str | None = None) -> list[MeshSide]:
 
 def _side(s: Stage, side: str, H: int, load: float) -> MeshSide:
     geo = s.geometry
-    derived = geo is not None and geo.derives_stiffness
+    derived = s.stiffness_from_geometry
     if derived:
         wave = mesh_wave(s, side, H, load=load)
         full = mesh_wave(s, side, TRUNCATION_HARMONICS, load=load)

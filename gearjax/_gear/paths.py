@@ -9,6 +9,12 @@ A path names one scalar leaf of a :class:`Train` with the train-file keys
 - ``STAGE.KEY.SIDE`` for ``contact_ratio``, ``mesh_stiffness``, ``half_backlash``
   (SIDE = ``sun`` | ``ring``) and ``inertia`` (``sun`` | ``ring`` | ``carrier`` |
   ``planet``);
+- for a stage whose stiffness comes from its tooth geometry (``face_width_mm`` without
+  ``mesh_stiffness`` and ``contact_ratio``), ``STAGE.face_width_mm``,
+  ``STAGE.profile_shift.GEAR`` (GEAR = ``sun`` | ``planet`` | ``ring``) and the
+  coefficients ``addendum_coefficient``, ``dedendum_coefficient``,
+  ``root_radius_coefficient``, ``youngs_modulus``, ``poisson_ratio`` instead of
+  ``contact_ratio`` and ``mesh_stiffness``;
 - ``STAGE.planet_angles_deg.I`` for the angle of planet ``I``, **1-based** as in
   "planet 2" of the messages and mesh names (``1.sp2``); planet 1 is the reference at
   0 deg and is not a parameter;
@@ -135,7 +141,7 @@ def continuous_paths(train: Train, gear: str | None = None, *, linear: bool = Fa
         for key in ("module_mm", "pressure_angle_deg", "carrier_radius_mm"):
             if getattr(s, key) is not None:
                 out.append(f + key)
-        if _derived(s):
+        if s.stiffness_from_geometry:
             out += [f + key for key in GEOMETRY_SCALARS]
             out += [f"{f}profile_shift.{g}" for g in GEARS]
         else:
@@ -152,10 +158,6 @@ def continuous_paths(train: Train, gear: str | None = None, *, linear: bool = Fa
     out += [f"housing.{k}" for k in HOUSING_KEYS]
     out += [f"gears.{g.name}.{k}" for g in train.gears for k in GEAR_KEYS]
     return [p for p in out if keep(p)]
-
-
-def _derived(stage) -> bool:
-    return stage.geometry is not None and stage.geometry.derives_stiffness
 
 
 def _affects(train: Train, gear: str, linear: bool) -> Callable[[str], bool]:
@@ -243,7 +245,7 @@ def _stage_leaf(train: Train, k: int, parts: list[str], bad) -> Leaf:
     key = parts[1]
     if key in GEOMETRY_SCALARS or key == "profile_shift":
         return _geometry_leaf(s, k, parts, bad)
-    if key in ("contact_ratio", "mesh_stiffness") and _derived(s):
+    if key in ("contact_ratio", "mesh_stiffness") and s.stiffness_from_geometry:
         raise bad(f"stage {s.id!r} derives {key} from its tooth geometry; vary "
                   f"{s.id}.face_width_mm or {s.id}.profile_shift.sun|planet|ring instead")
     if key in STAGE_SCALARS:

@@ -519,8 +519,7 @@ def train_to_dict(train: Train) -> dict:
         }
         if s.carrier_radius_mm is not None:
             d["carrier_radius_mm"] = _f(s.carrier_radius_mm)
-        derived = s.geometry is not None and s.geometry.derives_stiffness
-        for key in ("half_backlash",) if derived else ("contact_ratio", "mesh_stiffness",
+        for key in ("half_backlash",) if s.stiffness_from_geometry else ("contact_ratio", "mesh_stiffness",
                                                        "half_backlash"):
             pair = getattr(s, key)
             d[key] = {"sun": _f(pair.sun), "ring": _f(pair.ring)}

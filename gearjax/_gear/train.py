@@ -126,6 +126,13 @@ class Stage(eqx.Module):
     geometry: ToothGeometry | None = None
 
     @property
+    def stiffness_from_geometry(self) -> bool:
+        """The mesh stiffness wave comes from the tooth geometry (module docstring of
+        :mod:`gearjax._gear.mesh_stiffness`), not from ``mesh_stiffness`` and
+        ``contact_ratio``."""
+        return self.geometry is not None and self.geometry.derives_stiffness
+
+    @property
     def n_planets(self) -> int:
         return self.planet_angles_deg.shape[-1]
 

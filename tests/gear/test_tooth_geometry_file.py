@@ -166,3 +166,17 @@ def test_response_derivative_through_the_geometry_matches_finite_differences():
         fd = (r_plus - r_minus) / (2 * step)
         assert abs(fd) > 1e-3 * abs(result.value)  # the geometry moves the response
         np.testing.assert_allclose(result.derivative[k], fd, rtol=1e-5)
+
+
+def test_geometry_paths_replace_the_stiffness_paths_of_a_derived_stage():
+    train = load(TEXT)
+    paths = gj.continuous_paths(train, "reduction")
+    assert {"1.face_width_mm", "1.profile_shift.sun", "1.profile_shift.ring"} <= set(paths)
+    assert not any(p.startswith(("1.mesh_stiffness", "1.contact_ratio")) for p in paths)
+    wider = gj.set_path(train, "1.face_width_mm", 50.0)
+    np.testing.assert_allclose(assemble(wider).kbar[0] / assemble(train).kbar[0], 1.25,
+                               rtol=1e-12)  # every compliance term scales as 1 / b
+    with pytest.raises(gj.TrainError, match="derives mesh_stiffness from its tooth geometry"):
+        gj.get_path(train, "1.mesh_stiffness.sun")
+    with pytest.raises(gj.TrainError, match="has no tooth geometry"):
+        gj.get_path(gj.load_train(), "1.face_width_mm")
