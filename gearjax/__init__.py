@@ -136,6 +136,10 @@ from ._io.results import (
     sweep_dataset as sweep_dataset,
 )
 from ._studies.simulate import simulate_gear as simulate_gear
+from ._studies.validity import (
+    ContactLossWarning as ContactLossWarning,
+    contact_loss as contact_loss,
+)
 from ._studies.concurrency import threads as threads
 from ._studies.sweep import (
     SweepResult as SweepResult,

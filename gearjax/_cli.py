@@ -8,6 +8,8 @@ flag words stay together.
 Exit codes: 0 finished; 2 bad input or usage (one line on stderr, no traceback);
 3 finished but nothing converged; 1 an internal error or a problem too large for the
 memory (one line; ``GEARJAX_DEBUG=1`` shows the traceback); 130 interrupted.
+JAX's and XLA's own log messages stay off stderr (the console script, :func:`console`)
+unless ``GEARJAX_DEBUG=1``.
 ``--json`` prints one JSON object on stdout and nothing else there; warnings go to
 stderr, one line each.
 
@@ -44,10 +46,14 @@ from ._errors import (
     field_message,
     one_line,
 )
+from ._config import quiet_jax_logs
 from ._environment import check_environment
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT, EXIT_NOT_CONVERGED, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 DEBUG_ENV = "GEARJAX_DEBUG"
+DEFAULT_INPUT_RPM = 1000.0
+"""``info``'s input speed where neither ``--input-rpm`` nor the gear's ``input_rpm`` is
+given."""
 
 ARGUMENT_FLAGS = {
     # every command, and the sweep
@@ -75,6 +81,16 @@ ARGUMENT_FLAGS = {
     "what": "--what", "out": "--out",
 }
 """The flag of each Python argument name the library's errors use."""
+
+
+def console() -> None:
+    """The ``gearjax`` console script: :func:`main` on ``sys.argv``, with JAX's and XLA's
+    log messages kept off stderr (:func:`~gearjax._config.quiet_jax_logs`) unless
+    ``GEARJAX_DEBUG=1``; exits with :func:`main`'s code. Callers of :func:`main` in
+    Python keep their own logging."""
+    if os.environ.get(DEBUG_ENV, "") in ("", "0"):
+        quiet_jax_logs()
+    sys.exit(main())
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -334,7 +350,9 @@ def _parser() -> argparse.ArgumentParser:
         return c
 
     c = command("info", _info, "kinematics, phasing and static loads of a gear")
-    c.add_argument("--input-rpm", type=float, default=1000.0, help="input speed (rpm)")
+    c.add_argument("--input-rpm", type=float, default=None,
+                   help=f"input speed (rpm); default: the gear's input_rpm in the train file, "
+                        f"else {DEFAULT_INPUT_RPM:g}")
     c = command("modes", _modes, "natural frequencies, shapes and classes of a gear")
     c.add_argument("--plot", metavar="FIG", help="write the elastic mode shapes to FIG")
     c = command("calibrate", _calibrate, "fit parameters to target natural frequencies")
@@ -348,9 +366,10 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--stage", default=None, metavar="ID", help="stage id (default: every stage)")
     c.add_argument("--plot", metavar="FIG", help="write the mesh cycle of the stage to FIG")
     c = command("sweep", _sweep_cmd, "frequency response by harmonic balance and continuation")
-    c.add_argument("--from", dest="from_hz", type=float, default=2000.0, metavar="HZ",
-                   help="start, reference-stage mesh frequency (Hz); direction = order")
-    c.add_argument("--to", dest="to_hz", type=float, default=15000.0, metavar="HZ")
+    c.add_argument("--from", dest="from_hz", type=float, default=None, metavar="HZ",
+                   help="start, reference-stage mesh frequency (Hz); direction = order; "
+                        "without --from and --to, a band chosen from the gear's modes")
+    c.add_argument("--to", dest="to_hz", type=float, default=None, metavar="HZ")
     c.add_argument("--stage", help="reference stage id (default: first turning stage)")
     c.add_argument("--linear", action="store_true", help="no backlash")
     c.add_argument("--harmonics", type=int, metavar="K",
@@ -500,9 +519,11 @@ def _info(args, train, notes) -> int:
     from ._gear.phasing import phasing_report
     from ._gear.static_loads import static_loads
 
+    g = train.gear(args.gear)
+    if args.input_rpm is None:  # the gear's own speed where the file gives one
+        args.input_rpm = g.input_rpm if g.input_rpm is not None else DEFAULT_INPUT_RPM
     if not (args.input_rpm > 0 and math.isfinite(args.input_rpm)):
         raise fail("command line", "--input-rpm", args.input_rpm, "must be a positive speed in rpm")
-    g = train.gear(args.gear)
     kin = kinematics(train, g.name)
     loads = static_loads(train, g.name)
     phasing = {}
@@ -798,11 +819,17 @@ def _sweep_cmd(args, train, notes) -> int:
 def _sweep_run(args, train, notes, journal) -> int:
     from ._io.results import save_results
     from ._studies.sweep import progress_bar, summary_json, sweep
-    from ._studies.sweep.summary import bifurcation_lines
+    from ._studies.sweep.default_band import resolve_band
+    from ._studies.sweep.summary import bifurcation_lines, change_words
 
     if args.resume and journal.exists():
         _stderr(f"sweep: resuming from {journal}")
     g = train.gear(args.gear)
+    args.from_hz, args.to_hz, chosen = resolve_band(train, g.name, args.stage, args.linear,
+                                                    args.from_hz, args.to_hz)
+    if chosen is not None:
+        _stderr(f"sweep: no --from/--to: band {args.from_hz:.1f}-{args.to_hz:.1f} Hz, "
+                f"chosen {chosen}")
     # a bar on a terminal; under --json or off a terminal only its final line
     with progress_bar(args.from_hz, args.to_hz, sys.stderr, quiet=args.json) as bar:
         result = sweep(train, g.name, args.from_hz, args.to_hz, stage=args.stage,
@@ -829,7 +856,6 @@ def _sweep_run(args, train, notes, journal) -> int:
     if args.json:
         _emit(out)
         return code
-    rms = ds["rms_force"].values
     stable = ds["stable"].values
     print(f"sweep of gear {g.name!r}: {ds.sizes['point']} points, "
           f"{'linear' if args.linear else 'with backlash'}, stop: {result.stop}, "
@@ -859,15 +885,20 @@ def _sweep_run(args, train, notes, journal) -> int:
               f"{r['at_hz']:.1f} Hz")
     print(f"unstable points: {int(np.sum(stable == 0))}")
     for b in out["bifurcations"]:
-        print(f"  stability changes near {b['mesh_frequency_hz']:.1f} Hz: {b['kind']}")
+        print(f"  stability changes near {b['mesh_frequency_hz']:.1f} Hz: {change_words(b)}")
     for line in bifurcation_lines(out["bifurcation_notes"]):
         print(f"  {line}")
-    for stage in dict.fromkeys(ds["stage"].values.tolist()):
-        cols = ds["stage"].values == stage
-        peak = np.nanargmax(np.nanmax(rms[:, cols], axis=1))
-        print(f"stage {stage}: largest RMS mesh force {np.nanmax(rms[:, cols]):.1f} N at "
-              f"{float(ds['mesh_frequency_hz'][peak]):.1f} Hz; largest separation share "
-              f"{np.nanmax(ds['separation'].values[:, cols]):.3f}")
+    lo, hi = out["band_hz"]
+    for row in out["largest"]:  # stable, converged points inside the band asked for
+        scope = (f"(stable points inside {lo:.1f}-{hi:.1f} Hz: {row['points']} of "
+                 f"{row['of']})")
+        if row["rms_force"] is None:
+            print(f"stage {row['stage']}: {row['reason']}")
+            continue
+        share = "-" if row["separation"] is None else f"{row['separation']:.3f}"
+        print(f"stage {row['stage']}: largest RMS mesh force {row['rms_force']:.1f} N at "
+              f"{row['mesh_frequency_hz']:.1f} Hz ({row['mesh']}); largest separation share "
+              f"{share} {scope}")
     if args.out:
         print(f"results written to {args.out}")
     if args.plot:
@@ -1077,11 +1108,15 @@ def _sensitivity_cmd(args, train, notes) -> int:
           f"K = {result.harmonics}: {result.result}")
     if not result.ok:
         return code
-    print(f"{'path':>28} {'value':>12} {'dR/dp':>13} {'per':>8} {'(p/R) dR/dp':>12}")
+    print(f"ranked {out['ranking']}")
+    print(f"{'path':>28} {'value':>12} {'dR/dp':>13} {'per':>8} {'(p/R) dR/dp':>12} "
+          f"{'step s':>10} {'(s/R) dR/dp':>12}")
     for row in out["derivatives"]:
         norm = "-" if row["normalised"] is None else f"{row['normalised']:+.4e}"
+        rel = "-" if row["relative"] is None else f"{row['relative']:+.4e}"
+        step = ("value" if row["step_rule"] is None else f"{row['step']:.4g} {row['unit']}")
         print(f"{row['path']:>28} {row['value']:>12.5g} {row['derivative']:>+13.5e} "
-              f"{row['unit']:>8} {norm:>12}")
+              f"{row['unit']:>8} {norm:>12} {step:>10} {rel:>12}")
     return code
 
 
@@ -1226,4 +1261,4 @@ def _json_safe(obj):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    console()

@@ -1,6 +1,7 @@
 """Set when gearjax is imported: float64 (tight Newton tolerances stall in float32), and
 JAX's persistent compilation cache, so that a second run reuses the programs the first
-one compiled.
+one compiled. :func:`quiet_jax_logs`, for the command line only, keeps JAX's and XLA's
+log messages off stderr.
 
 The cache lives in ``$XDG_CACHE_HOME/gearjax/jax`` (``~/.cache/gearjax/jax`` by
 default), never inside the package or the working directory, and holds at most
@@ -47,6 +48,28 @@ def _enable_cache() -> None:
 
 
 _enable_cache()
+
+
+QUIET_LEVEL = "CRITICAL"
+"""JAX's logging level on the command line: its Python loggers and XLA's C++ log keep
+only fatal messages."""
+
+
+def quiet_jax_logs() -> bool:
+    """Keep JAX's and XLA's log messages off stderr for the rest of the process: JAX's own
+    setting ``jax_logging_level`` to :data:`QUIET_LEVEL`, which sets its Python loggers
+    (``jax``, ``jaxlib``) and the threshold of XLA's C++ log (the ``E1205 ...
+    slow_operation_alarm ... Constant folding`` lines of a long compilation; at run time,
+    so it works after jaxlib is loaded, where ``TF_CPP_MIN_LOG_LEVEL`` is read only when it
+    loads). The console script calls it (``gearjax._cli.console``) unless
+    ``GEARJAX_DEBUG=1``; importing gearjax never does, so a library user's logging is
+    theirs. A ``JAX_LOGGING_LEVEL`` the user set is kept.
+
+    **Returns:** whether it changed the level (``False``: ``JAX_LOGGING_LEVEL`` is set)."""
+    if os.environ.get("JAX_LOGGING_LEVEL"):
+        return False
+    jax.config.update("jax_logging_level", QUIET_LEVEL)
+    return True
 
 
 def require_x64() -> None:

@@ -41,6 +41,10 @@ class RESULTS(optx.RESULTS):  # type: ignore[misc]
     fold = "The point lies at a fold of the branch: its derivative is unbounded there."
     unstable = "The periodic state is unstable: no test rig settles onto it."
     not_converged = "The point did not converge: it has no derivative."
+    lightly_damped_mode = ("A Floquet multiplier of the linear response lies near +1 through "
+                           "a lightly damped mode (near-rigid, or in resonance with a "
+                           "harmonic of the response), not a fold (a linear system has "
+                           "none): its derivative is ill-conditioned there.")
 
 
 _WORDS = {"successful": "converged", "nonlinear_max_steps_reached": "max_steps",
@@ -51,7 +55,7 @@ _NAMES = ("successful", "max_steps_reached", "singular", "breakdown", "stagnatio
           "nonfinite_input", "nonlinear_max_steps_reached", "nonlinear_divergence",
           "nonfinite", "not_periodic", "quasi_periodic", "not_stationary", "solver_failed", "reached_end", "max_points",
           "step_too_small", "closed_loop", "detour", "runaway", "no_converged_start",
-          "fold", "unstable", "not_converged")
+          "fold", "unstable", "not_converged", "lightly_damped_mode")
 """Every item's name (an equinox enumeration lists none)."""
 _LEGACY_CODES = {"hb": ("converged", "max_steps", "nonfinite"),
                  "time_domain": ("converged", "not_periodic", "max_steps", "solver_failed",

@@ -22,7 +22,7 @@ from .kinematics import Kinematics, kinematics
 from .mesh_stiffness import mesh_wave, planet_load
 from .phasing import harmonic_phases, stiffness_amplitudes
 from .._engine.system import System
-from .train import MEMBERS, Train, member_index, member_paths
+from .train import MEMBERS, Train, member_index, member_inertia, member_paths
 
 
 def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = None,
@@ -37,9 +37,11 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
 
     Housing springs: ``housing.braked`` for members in the gear's ``brakes``,
     ``housing.free`` for every other central member; engaged couplings as springs
-    between members; mean torques: ``input_torque`` on the input, ``-input_torque *
-    ratio`` on the output, ``drag_torque`` against the motion of every other free
-    member; ripple on the input member at its orders of the input speed.
+    between members, and their dampers (``damping`` or ``damping_ratio``,
+    :meth:`~gearjax._gear.train.Coupling.viscous_damping`) as the only entries of ``C``;
+    mean torques: ``input_torque`` on the input, ``-input_torque * ratio`` on the
+    output, ``drag_torque`` against the motion of every other free member; ripple on the
+    input member at its orders of the input speed.
     """
     require_x64()
     g = train.gear(gear)
@@ -123,7 +125,7 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
     stack = lambda xs, cols: jnp.stack(xs) if xs else jnp.zeros((0, cols))  # noqa: E731
     return System(
         M=M,
-        C=jnp.zeros((n, n)),
+        C=_dampers(train, g, n),
         spring_rows=spring_rows,
         spring_stiffness=spring_k,
         W=stack(W_rows, n),
@@ -169,6 +171,19 @@ def _springs(train: Train, g, n: int):
         ks.append(c.stiffness)
         classes.append("penalty" if _at_least(c.stiffness, train.housing.braked) else "elastic")
     return jnp.stack(rows), jnp.stack(ks), tuple(classes)
+
+
+def _dampers(train: Train, g, n: int):
+    """Viscous matrix ``(n, n)`` (N m s/rad) of the engaged couplings' dampers:
+    ``c (e_i - e_j)(e_i - e_j)^T`` each; exactly zero where no coupling has one."""
+    C = jnp.zeros((n, n))
+    for c in train.engaged_couplings(g.name):
+        if not c.damped:
+            continue
+        i, j = (member_index(train, m) for m in c.members)
+        coef = c.viscous_damping(*(member_inertia(train, m) for m in c.members))
+        C = C.at[i, i].add(coef).at[j, j].add(coef).at[i, j].add(-coef).at[j, i].add(-coef)
+    return C
 
 
 def _at_least(a, b) -> bool:

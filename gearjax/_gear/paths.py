@@ -20,7 +20,9 @@ A path names one scalar leaf of a :class:`Train` with the train-file keys
   0 deg and is not a parameter;
 - ``housing.braked``, ``housing.free``;
 - ``couplings.ID.stiffness`` (by the coupling's ``id``) or ``couplings.K.stiffness``
-  (``K`` its 0-based position in the file; an ``id`` wins when both match);
+  (``K`` its 0-based position in the file; an ``id`` wins when both match), and
+  ``couplings.ID.damping`` or ``couplings.ID.damping_ratio``, whichever the file gives
+  (only then);
 - ``gears.NAME.input_torque``, ``gears.NAME.drag_torque``.
 
 ``STAGE`` is a stage id; stage ids are matched before the words ``housing``,
@@ -69,6 +71,7 @@ _STAGE_NOT_CONTINUOUS = {
     "transmission_error": "transmission_error is a table of harmonics, not one number",
 }
 HOUSING_KEYS = ("braked", "free")
+COUPLING_KEYS = ("stiffness", "damping", "damping_ratio")
 GEAR_KEYS = ("input_torque", "drag_torque")
 _SECTIONS = ("housing", "couplings", "gears")
 
@@ -123,8 +126,9 @@ def continuous_paths(train: Train, gear: str | None = None, *, linear: bool = Fa
                      ) -> list[str]:
     """Every continuous scalar path of ``train`` in file order (canonical spellings).
 
-    Couplings appear once, by ``id`` when they have one, else by 0-based position;
-    ``carrier_radius_mm`` only where the file sets it; planet angles from planet 2.
+    Couplings appear by ``id`` when they have one, else by 0-based position, with their
+    damper key where the file gives one; ``carrier_radius_mm`` only where the file sets
+    it; planet angles from planet 2.
 
     With ``gear``, only the paths that change that gear's assembled system: not the
     other gears' torques, not clutches that gear leaves open, not ``housing.braked``
@@ -154,7 +158,8 @@ def continuous_paths(train: Train, gear: str | None = None, *, linear: bool = Fa
         out += [f"{f}inertia.{k}" for k in STAGE_TABLES["inertia"]]
         out.append(f + "planet_mass")
     for k, c in enumerate(train.couplings):
-        out.append(f"couplings.{c.id if c.id is not None else k}.stiffness")
+        out += [f"couplings.{c.id if c.id is not None else k}.{key}"
+                for key in COUPLING_KEYS if getattr(c, key) is not None]
     out += [f"housing.{k}" for k in HOUSING_KEYS]
     out += [f"gears.{g.name}.{k}" for g in train.gears for k in GEAR_KEYS]
     return [p for p in out if keep(p)]
@@ -166,8 +171,9 @@ def _affects(train: Train, gear: str, linear: bool) -> Callable[[str], bool]:
     g = train.gear(gear)
     kin = kinematics(train, g.name)
     still = {s.id for s in kin.stages if not s.turning}
-    open_ = {f"couplings.{c.id if c.id is not None else k}.stiffness"
-             for k, c in enumerate(train.couplings) if not c.engaged(g.name)}
+    open_ = {f"couplings.{c.id if c.id is not None else k}.{key}"
+             for k, c in enumerate(train.couplings) if not c.engaged(g.name)
+             for key in COUPLING_KEYS}
     members = member_paths(train)
     dragged = any(kin.speeds.get(p, 0) != 0 and p not in (g.input, g.output)
                   and p not in g.brakes for p in members)
@@ -305,10 +311,12 @@ def _coupling_leaf(train: Train, parts: list[str], bad) -> Leaf:
     names = [c.id if c.id is not None else str(k) for k, c in enumerate(train.couplings)]
     valid = "the train has no couplings"
     if names:
-        valid = (f"couplings.ID.stiffness or couplings.K.stiffness (K = 0..{len(names) - 1}, "
-                 f"file order); couplings are {', '.join(names)}")
-    if len(parts) < 3 or parts[-1] != "stiffness":
-        raise bad(f"a coupling has one parameter, stiffness: {valid}")
+        valid = (f"couplings.ID.KEY or couplings.K.KEY (K = 0..{len(names) - 1}, file order); "
+                 f"couplings are {', '.join(names)}")
+    if len(parts) < 3 or parts[-1] not in COUPLING_KEYS:
+        raise bad(f"a coupling's parameters are stiffness, and damping or damping_ratio where "
+                  f"the file gives one (KEY): {valid}")
+    key = parts[-1]
     name = ".".join(parts[1:-1])
     ids = [c.id for c in train.couplings]
     if name in ids:
@@ -318,8 +326,14 @@ def _coupling_leaf(train: Train, parts: list[str], bad) -> Leaf:
     else:
         raise bad(f"no coupling {name!r}; {valid}")
     c = train.couplings[k]
-    canonical = f"couplings.{c.id if c.id is not None else k}.stiffness"
-    return Leaf(canonical, _getter(("couplings", k, "stiffness")))
+    canonical = f"couplings.{c.id if c.id is not None else k}.{key}"
+    if getattr(c, key) is None:
+        given = [x for x in ("damping", "damping_ratio") if getattr(c, x) is not None]
+        raise bad(f"coupling {c.label!r} gives its damper as {given[0]}, not {key}: vary "
+                  f"{canonical.rpartition('.')[0]}.{given[0]}" if given else
+                  f"coupling {c.label!r} has no damper; set damping (N m s/rad) or "
+                  "damping_ratio in the train file (0 is allowed) to vary it")
+    return Leaf(canonical, _getter(("couplings", k, key)))
 
 
 def _gear_leaf(train: Train, parts: list[str], bad) -> Leaf:

@@ -2,7 +2,7 @@
 
 Reading checks every key's type and sign as it goes and names the file, field,
 value and rule of the first thing that is wrong, then every value's bounds
-(``_validate.check_ranges``); whole-train rules (member paths, kinematics, planet
+(``bounds.check_ranges``); whole-train rules (member paths, kinematics, planet
 overlap) and the geometry and range warnings live in ``_validate``. A file that cannot
 be read (missing, a directory, not UTF-8, not TOML) is refused the same way.
 """
@@ -36,7 +36,8 @@ from .train import (
 )
 from .mesh_stiffness import geometric_stiffness
 from .tooth_rules import check_tooth_geometry
-from .validate import check_ranges, validate_train
+from .bounds import check_ranges
+from .validate import validate_train
 
 BUNDLED_EXAMPLE = "al_shyyab_2009.toml"
 
@@ -51,13 +52,13 @@ _STAGE_KEYS = {"id", "teeth", "module_mm", "pressure_angle_deg", "planet_angles_
 _GEOMETRY_DEFAULTS = {"addendum_coefficient": 1.0, "dedendum_coefficient": 1.25,
                       "root_radius_coefficient": 0.38, "youngs_modulus": 206e9,
                       "poisson_ratio": 0.3}
-"""Tooth-geometry keys beside ``face_width_mm`` and their defaults (ISO 53 profile A,
-steel)."""
+"""Tooth-geometry keys beside ``face_width_mm``, defaults: ISO 53 profile A, steel."""
 _GEARS = ("sun", "planet", "ring")
-_COUPLING_KEYS = {"members", "stiffness", "id", "gears"}
+_DAMPER_KEYS = ("damping", "damping_ratio")
+_COUPLING_KEYS = {"members", "stiffness", "id", "gears", *_DAMPER_KEYS}
 _HOUSING_KEYS = {"braked", "free"}
 _GEAR_KEYS = {"input", "output", "brakes", "input_torque", "input_torque_ripple", "drag_torque",
-              "note"}
+              "note", "input_rpm"}
 PHASING_RULES = ("physical", "paper")
 MESH_DAMPING_RULES = ("always", "contact")
 
@@ -293,10 +294,10 @@ def _tip_relief(r: _Reader, raw, f: str, teeth: Teeth, module, pressure):
         if len(ways) == 2:
             raise r.fail(field + ".start_roll_deg", entry["start_roll_deg"],
                          "give the start as start_diameter_mm or start_roll_deg, not both")
+        if not ways and float(amounts[g]) > 0:
+            raise r.fail(field + ".start_diameter_mm", None,
+                         "is required with amount_um (or start_roll_deg)")
         if not ways:
-            if float(amounts[g]) > 0:
-                raise r.fail(field + ".start_diameter_mm", None,
-                             "is required with amount_um (or start_roll_deg)")
             starts[g] = jnp.asarray(base)
         elif ways[0] == "start_diameter_mm":
             starts[g] = r.number(entry, "start_diameter_mm", field + ".start_diameter_mm",
@@ -310,11 +311,9 @@ def _tip_relief(r: _Reader, raw, f: str, teeth: Teeth, module, pressure):
 def with_geometric_stiffness(stage: Stage) -> Stage:
     """``stage`` with ``contact_ratio`` and ``mesh_stiffness`` set to the values its
     tooth geometry gives (unloaded mean stiffness, geometric contact ratio)."""
-    values = {side: geometric_stiffness(stage, side) for side in ("sun", "ring")}
-    return eqx.tree_at(
-        lambda s: (s.contact_ratio, s.mesh_stiffness), stage,
-        (SunRing(**{k: v[1] for k, v in values.items()}),
-         SunRing(**{k: v[0] for k, v in values.items()})))
+    (k_s, c_s), (k_r, c_r) = (geometric_stiffness(stage, side) for side in ("sun", "ring"))
+    return eqx.tree_at(lambda s: (s.contact_ratio, s.mesh_stiffness), stage,
+                       (SunRing(sun=c_s, ring=c_r), SunRing(sun=k_s, ring=k_r)))
 
 
 def _transmission_error(r: _Reader, raw, f: str) -> TransmissionError:
@@ -348,11 +347,12 @@ def _coupling(r: _Reader, raw, i: int) -> Coupling:
         if not isinstance(gears, list) or not all(isinstance(g, str) for g in gears):
             raise r.fail(f + ".gears", gears, "must be a list of gear names")
         gears = tuple(gears)
-    return Coupling(
+    return Coupling(  # damping and damping_ratio together: refused by check_ranges
         members=(members[0], members[1]),
         stiffness=r.number(raw, "stiffness", f + ".stiffness", low=0.0),
         id=cid,
         gears=gears,
+        **{k: r.number(raw, k, f"{f}.{k}", low=0.0) for k in _DAMPER_KEYS if k in raw},
     )
 
 
@@ -387,6 +387,8 @@ def _gear(r: _Reader, name: str, raw) -> Gear:
         drag_torque=r.number(raw, "drag_torque", f + ".drag_torque", default=0.0, low=0.0),
         ripple_orders=tuple(float(o) for o in ripple[:, 2]),
         note=note,
+        input_rpm=(float(r.number(raw, "input_rpm", f + ".input_rpm", low=0.0, strict=True))
+                   if "input_rpm" in raw else None),
     )
 
 
@@ -544,6 +546,7 @@ def train_to_dict(train: Train) -> dict:
             d["id"] = c.id
         d["members"] = list(c.members)
         d["stiffness"] = _f(c.stiffness)
+        d.update({k: _f(getattr(c, k)) for k in _DAMPER_KEYS if getattr(c, k) is not None})
         if c.gears is not None:
             d["gears"] = list(c.gears)
         couplings.append(d)
@@ -559,6 +562,8 @@ def train_to_dict(train: Train) -> dict:
             d["input_torque_ripple"] = [[_f(a), _f(ph), float(o)]
                                         for (a, ph), o in zip(ripple, g.ripple_orders)]
         d["drag_torque"] = _f(g.drag_torque)
+        if g.input_rpm is not None:
+            d["input_rpm"] = g.input_rpm
         if g.note is not None:
             d["note"] = g.note
         gears[g.name] = d

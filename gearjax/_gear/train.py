@@ -149,18 +149,47 @@ class Stage(eqx.Module):
 
 
 class Coupling(eqx.Module):
-    """A torsional spring (N m/rad) between central members of two stages.
+    """A torsional spring (N m/rad) between central members of two stages, with an
+    optional viscous damper in parallel.
 
     Permanent when ``gears`` is None, otherwise a clutch engaged only in those gears.
+    The damper is given one of two ways (train-file keys, at most one; ``None``: not
+    given): ``damping`` in N m s/rad, or ``damping_ratio`` ``zeta`` of the coupling's own
+    mode, the two members as rigid inertias ``J_1``, ``J_2`` (:func:`member_inertia`)
+    joined by the spring alone: ``c = 2 zeta sqrt(k J_1 J_2 / (J_1 + J_2))``
+    (:meth:`viscous_damping`). Neither: no damper.
     """
 
     members: tuple[str, str] = eqx.field(static=True)
     stiffness: Float[Array, ""]
     id: str | None = eqx.field(static=True, default=None)
     gears: tuple[str, ...] | None = eqx.field(static=True, default=None)
+    damping: Float[Array, ""] | None = None
+    damping_ratio: Float[Array, ""] | None = None
 
     def engaged(self, gear: str) -> bool:
         return self.gears is None or gear in self.gears
+
+    @property
+    def damped(self) -> bool:
+        """The file gives a damper (``damping`` or ``damping_ratio``, possibly 0)."""
+        return self.damping is not None or self.damping_ratio is not None
+
+    def critical_damping(self, j1, j2) -> Float[Array, ""]:
+        """``2 sqrt(k j1 j2 / (j1 + j2))`` (N m s/rad): the damping that makes the
+        coupling's own mode, members of inertias ``j1``, ``j2`` (kg m^2) on its spring
+        alone, critically damped."""
+        return 2 * jnp.sqrt(self.stiffness * j1 * j2 / (j1 + j2))
+
+    def viscous_damping(self, j1, j2) -> Float[Array, ""]:
+        """The damper's coefficient ``c`` (N m s/rad) between members of inertias ``j1``,
+        ``j2`` (kg m^2): ``damping`` as given, or ``damping_ratio`` times
+        :meth:`critical_damping`; 0 without a damper."""
+        if self.damping is not None:
+            return jnp.asarray(self.damping)
+        if self.damping_ratio is not None:
+            return self.damping_ratio * self.critical_damping(j1, j2)
+        return jnp.asarray(0.0)
 
     @property
     def label(self) -> str:
@@ -180,7 +209,8 @@ class Gear(eqx.Module):
     ``input_torque_ripple`` has shape ``(L, 2)``, rows ``(amplitude [N m], phase [deg])``
     at ``ripple_orders`` (static: they set frequencies, so they are structure), each a
     multiple of the input shaft speed. The train file writes the three together as
-    ``[[amplitude, phase_deg, order], ...]``.
+    ``[[amplitude, phase_deg, order], ...]``. ``input_rpm``: the gear's operating input
+    speed (rpm) where the file gives one (``info`` reports at it), else ``None``.
     """
 
     name: str = eqx.field(static=True)
@@ -191,6 +221,7 @@ class Gear(eqx.Module):
     input_torque_ripple: Float[Array, "L 2"]
     drag_torque: Float[Array, ""]
     ripple_orders: tuple[float, ...] = eqx.field(static=True, default=())
+    input_rpm: float | None = eqx.field(static=True, default=None)
     note: str | None = eqx.field(static=True, default=None)
 
 
@@ -252,6 +283,19 @@ def member_index(train: Train, path: str) -> int:
             return offset + MEMBERS.index(member)
         offset += 3 + s.n_planets
     raise KeyError(path)
+
+
+def member_inertia(train: Train, path: str) -> Float[Array, ""]:
+    """Polar inertia (kg m^2) of central member ``path`` (``"ID.sun|ring|carrier"``) on its
+    own, with the meshes taken away: ``inertia.sun``, ``inertia.ring``, or for a carrier
+    ``I_c + N m_p r_c^2``, the carrier carrying its ``N`` planets around, each free to spin
+    on its bearing (the mass matrix's carrier entry with the planet coordinates condensed
+    out). The inertia of a coupling's own mode (:meth:`Coupling.viscous_damping`)."""
+    stage_id, _, member = path.rpartition(".")
+    s = train.stage(stage_id)
+    if member == "carrier":
+        return s.inertia.carrier + s.n_planets * s.planet_mass * s.carrier_radius() ** 2
+    return getattr(s.inertia, member)
 
 
 def planet_index(train: Train, stage_id: str, planet: int) -> int:

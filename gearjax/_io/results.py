@@ -452,7 +452,9 @@ def points_json(ds: xr.Dataset) -> list[dict]:
     Each point: ``mesh_frequency_hz``, ``stage_mesh_frequency_hz`` (list, stage order),
     ``input_rpm``, ``result``, ``converged``, ``stable`` (bool or ``None``), ``period``
     (``None`` unless stored), for a sweep ``branch`` (its solution branch number) and,
-    where the sweep was completed, ``found`` (how that branch was found), and ``meshes``: ``{name, stage, side, planet, mean_force,
+    where the sweep was completed, ``found`` (how that branch was found), for a
+    harmonic-balance sweep ``max_multiplier`` (the largest Floquet multiplier modulus,
+    rigid-body modes excluded), and ``meshes``: ``{name, stage, side, planet, mean_force,
     rms_force, max_force, dlf, separation, back_contact, mean_torque}``. NaN and
     infinities become ``None``; a mesh with a ``None`` value gets a ``reason``.
     """
@@ -495,6 +497,8 @@ def points_json(ds: xr.Dataset) -> list[dict]:
             points[-1]["branch"] = int(ds["branch"].values[k])
             if "found" in ds:
                 points[-1]["found"] = str(ds["found"].values[k])
+        if "max_multiplier" in ds:  # a harmonic-balance sweep: its stability's measure
+            points[-1]["max_multiplier"] = _number(ds["max_multiplier"].values[k])
         if "period" in ds and not ds["period"].values[k] > 0:  # 0: no repeat found
             points[-1]["period"] = None
             points[-1]["period_reason"] = ("the orbit did not repeat within the integrated "

@@ -41,6 +41,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import warnings
 from collections.abc import Callable, Sequence
 
 import jax
@@ -57,6 +58,7 @@ from .._engine.system import System
 from .._gear.case import GearCase, gear_case, torus_fields
 from .._gear.toml_io import dumps_train
 from .._gear.train import Train
+from .validity import ContactLossWarning, contact_loss
 
 DEFAULT_SWEEP_POINTS = 20
 """Points of a ``from_hz``/``to_hz`` sweep when ``points`` is not given."""
@@ -352,13 +354,17 @@ def simulate_gear(
     where a window would be too long (:func:`windowed_settings`) and ``ValueError``
     where ``windowed.tol`` is below ``1 / windowed.n_beats``
     (:func:`~gearjax.simulate_windowed`).
+
+    **Warns:** :class:`~gearjax._studies.validity.ContactLossWarning` where a linear
+    run's alternating mesh force exceeds the static one (the teeth would leave contact),
+    naming the first frequency (:func:`~gearjax._studies.validity.contact_loss`).
     """
     t0 = time.perf_counter()
     f_hz, is_sweep = frequency_points(at_hz, from_hz, to_hz, points)
     case = gear_case(train, gear, stage, linear, torus=True)
     if case.G > 1:
-        return _simulate_torus(case, f_hz, is_sweep, x0, v0, windowed, batch_size, progress,
-                               command, t0)
+        return _warn_contact_loss(_simulate_torus(case, f_hz, is_sweep, x0, v0, windowed,
+                                                  batch_size, progress, command, t0))
     if progress:
         progress(f"simulate: integrating {len(f_hz)} points "
                  f"({'sweep' if is_sweep else 'independent'}; the first call compiles)")
@@ -368,10 +374,19 @@ def simulate_gear(
     if progress:
         progress(f"simulate: {len(f_hz)} points in {seconds:.1f} s")
     solver = {**solver_settings(settings), "linear": linear, "reference_stage": case.stage}
-    return trajectory_dataset(case, f_hz, tr, solver, attrs={
+    return _warn_contact_loss(trajectory_dataset(case, f_hz, tr, solver, attrs={
         "kind": "simulate", "mode": "sweep" if is_sweep else "points",
         "start": "static contact" if x0 is None else "given",
-        "seconds": seconds, "command": "" if command is None else command})
+        "seconds": seconds, "command": "" if command is None else command}))
+
+
+def _warn_contact_loss(ds):
+    """``ds``, after a :class:`~gearjax._studies.validity.ContactLossWarning` where its
+    linear results lose contact (:func:`~gearjax._studies.validity.contact_loss`)."""
+    loss = contact_loss(ds)
+    if loss is not None:
+        warnings.warn(ContactLossWarning(loss["warning"]), stacklevel=3)
+    return ds
 
 
 def _simulate_torus(case: GearCase, f_hz, is_sweep: bool, x0, v0, settings, batch_size,

@@ -26,7 +26,7 @@ import gearjax
 from gearjax import GeometryWarning, TrainError
 from gearjax._errors import RangeWarning, TrainWarning
 from gearjax._gear.toml_io import load_train
-from gearjax._gear.validate import BOUNDS, MAX_HARMONICS, check_ranges
+from gearjax._gear.bounds import BOUNDS, MAX_HARMONICS, check_ranges
 
 import train_refusals
 from train_refusals import SOURCE, mutate

@@ -6,6 +6,7 @@ this fast: the check is self-consistency of the harmonic balance at that K (impl
 derivative = derivative of the re-solved response)."""
 
 import json
+import pathlib
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 
 import gearjax as gj
+from sensitivity_differences import finite_differences
 from gearjax._engine import hb as _hb
 from gearjax import _cli
 from gearjax._studies import sensitivity as S
@@ -28,27 +30,6 @@ PATHS = ("1.mesh_stiffness.sun", "2.inertia.sun", "1.inertia.planet", "2.sun_rin
 def train(paper_train_h1):
     """The paper case with one stiffness harmonic: K = 8 holds its excitation."""
     return paper_train_h1
-
-
-def finite_differences(train, result, linear):
-    """Central differences of the re-solved response, Newton from the nominal solution."""
-    family = S.GearFamily.of(train, result.paths, result.gear, linear)
-    settings = _hb.HarmonicBalance(n_harmonics=result.harmonics)
-    theta = family.theta()
-    omega = jnp.asarray(result.omega)
-    X0 = S.solve_at(family, theta, settings, omega).X
-    resp = S.MeshResponse(field=S.RESPONSES[result.response],
-                          mesh=result.meshes.index(result.mesh))
-    fd, noise = [], []
-    for k, p in enumerate(np.asarray(theta)):
-        h = 1e-3 if S.path_unit(result.paths[k]) == "deg" else 1e-5 * abs(p)
-        e = jnp.zeros(theta.shape).at[k].set(h)
-        r_plus, c_plus = S.response_at(family, theta + e, settings, omega, resp, X0)
-        r_minus, c_minus = S.response_at(family, theta - e, settings, omega, resp, X0)
-        assert bool(c_plus == RESULTS.successful) and bool(c_minus == RESULTS.successful)
-        fd.append((r_plus - r_minus) / (2 * h))
-        noise.append(1e-10 * abs(result.value) / h)  # Newton's converged noise over h
-    return np.asarray(fd), np.asarray(noise)
 
 
 @pytest.fixture(scope="module")
@@ -166,8 +147,13 @@ def test_cli_json_ranked(capsys, backlash, paper_toml_h1):
     assert sorted(r["path"] for r in rows) == sorted(PATHS)
     norm = [abs(r["normalised"]) for r in rows if r["normalised"] is not None]
     assert norm == sorted(norm, reverse=True)
-    assert rows[-1]["normalised"] is None and "reason" in rows[-1]  # the phase at 0 deg
+    # ranked by the relative change over each parameter's step, whatever an angle's
+    # origin: the angles' elasticities, which depend on it, are not given
+    rel = [abs(r["relative"]) for r in rows]
+    assert rel == sorted(rel, reverse=True)
     by_path = {r["path"]: r for r in rows}
+    for path in ("2.sun_ring_phase_deg", "2.planet_angles_deg.2"):
+        assert by_path[path]["normalised"] is None and "origin" in by_path[path]["reason"]
     for k, p in enumerate(backlash.paths):
         assert by_path[p]["derivative"] == pytest.approx(backlash.derivative[k], rel=1e-9)
     assert by_path["2.planet_angles_deg.2"]["derivative_unit"] == "N per deg"
@@ -253,3 +239,62 @@ def test_default_paths_are_those_of_the_gear(train):
     assert [p for p, m in zip(every, moves) if m] == linear
     result = S.sensitivity(train, "first", AT, harmonics=K, linear=True)
     assert result.paths == tuple(linear)
+
+
+# ------------------------------------------------- a train with an idling set on a quill
+
+IDLER = pathlib.Path(__file__).parent.parent / "data" / "two_stage_idler.toml"
+IDLER_PATHS = ("drive.planet_angles_deg.2", "drive.planet_angles_deg.3",
+               "drive.sun_ring_phase_deg", "drive.mesh_stiffness.sun",
+               "couplings.quill.stiffness")
+
+
+@pytest.fixture(scope="module")
+def idler():
+    return gj.load_train(IDLER)
+
+
+def test_linear_refusal_names_the_near_rigid_mode(capsys, idler):
+    """A linear run has no fold: a multiplier near +1 comes from the idling set swinging
+    on its quill shaft (38 Hz, undamped: it strains no mesh), which the refusal names."""
+    code, out, err = run(capsys, "sensitivity", str(IDLER), "--at", "6000", "--linear",
+                         "--harmonics", "2", "--vary", *IDLER_PATHS, "--json")
+    assert code == 3
+    data = json.loads(out)
+    assert data["result"] == "lightly_damped_mode" and data["derivatives"] is None
+    mode = data["mode"]
+    # the quill mode of the modal analysis (the lowest elastic mode), near-rigid
+    elastic = [m.hz for m in gj.modes(gj.assemble(idler)).modes if m.cls == "elastic"]
+    assert mode["hz"] == pytest.approx(elastic[0], rel=1e-9) and mode["harmonic"] == 0
+    assert mode["damping_ratio"] < 1e-6 and mode["share"] > 0.99
+    # an undamped mode of frequency f over one period T: |exp(2 pi i f T) - 1|
+    assert data["fold_distance"] == pytest.approx(
+        abs(np.exp(2j * np.pi * mode["hz"] / 6000) - 1), rel=1e-3)
+    (line,) = [e for e in err.splitlines() if not e.startswith("warning:")]
+    assert line.startswith("gearjax: the linear response at 6000 Hz has no fold, but a "
+                           f"lightly damped near-rigid mode ({mode['hz']:.4g} Hz, damping "
+                           "ratio ")
+    assert "fold of the response" not in line
+
+
+def test_angles_ranked_by_their_step_in_absolute_units(idler):
+    """Angles are ranked by the change over one assembly slot (planet angles) or one
+    mesh cycle (the sun-ring phase), beside the others' elasticities."""
+    r = S.sensitivity(idler, at_hz=2000.0, paths=IDLER_PATHS, harmonics=2, linear=True)
+    assert r.ok, r.message
+    slot = 360 / (28 + 80)
+    np.testing.assert_allclose(r.steps, [slot, slot, 360.0, 3.0e8, 1.6e3])
+    np.testing.assert_allclose(r.relative, r.derivative * r.steps / r.value, rtol=1e-12)
+    assert np.all(np.isnan(r.normalised[:3])) and np.all(np.isfinite(r.normalised[3:]))
+    np.testing.assert_allclose(r.relative[3:], r.normalised[3:], rtol=1e-12)
+    rel = np.abs(r.relative)
+    assert [rel[k] for k in r.ranking()] == sorted(rel, reverse=True)
+    data = S.sensitivity_json(r)
+    assert "one assembly slot" in data["ranking"]
+    rows = {row["path"]: row for row in data["derivatives"]}
+    row = rows["drive.planet_angles_deg.3"]
+    assert row["derivative_unit"] == "N per deg" and row["unit"] == "deg"
+    assert row["step"] == pytest.approx(slot) and row["step_rule"].startswith(
+        "one assembly slot, 360/(28 + 80)")
+    assert rows["drive.sun_ring_phase_deg"]["step_rule"] == "one mesh cycle, 360 deg"
+    assert rows["drive.mesh_stiffness.sun"]["step_rule"] is None

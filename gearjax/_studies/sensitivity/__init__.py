@@ -11,6 +11,9 @@ differentiation.
   on a gear prepared once (:class:`GearPoint`);
 - :mod:`.band`: the smooth peak or the integral over a band of frequencies
   (:func:`band_sensitivity`, :class:`BandSensitivity`);
+- :mod:`.steps`: the step of each parameter that ranks the derivatives
+  (:func:`parameter_steps`: its value, or for an angle whose origin is a convention one
+  assembly slot or one mesh cycle);
 - :mod:`.output`: the ``sensitivity`` command's JSON (:func:`sensitivity_json`).
 """
 
@@ -30,6 +33,7 @@ from .implicit import check_point as check_point
 from .implicit import implicit_gradient as implicit_gradient
 from .implicit import point_status as point_status
 from .implicit import response_at as response_at
+from .implicit import slow_mode as slow_mode
 from .implicit import solve_at as solve_at
 from .output import path_unit as path_unit
 from .output import sensitivity_json as sensitivity_json
@@ -38,3 +42,6 @@ from .point import Sensitivity as Sensitivity
 from .point import mesh_index as mesh_index
 from .point import normalise as normalise
 from .point import sensitivity as sensitivity
+from .steps import RANKING_RULE as RANKING_RULE
+from .steps import parameter_steps as parameter_steps
+from .steps import relative_change as relative_change

@@ -28,6 +28,7 @@ from ..._gear.train import Train
 from .family import MeshResponse, response_field
 from .implicit import FOLD_TOL, SensitivityRefused, check_point
 from .point import GearPoint, mesh_index, normalise
+from .steps import parameter_steps, relative_change
 
 BAND_OBJECTIVES = ("peak", "integral")
 """The band objectives (argument ``objective``)."""
@@ -39,8 +40,8 @@ class BandSensitivity:
 
     **Fields:** ``objective`` (``peak`` | ``integral``), ``temperature`` (``peak``: tau
     relative to the largest response), ``tau`` (absolute, response units); ``value``;
-    ``paths``, ``values``, ``derivative``, ``normalised`` as
-    :class:`~gearjax._studies.sensitivity.Sensitivity`;
+    ``paths``, ``values``, ``derivative``, ``normalised``, ``steps``, ``step_rules``,
+    ``relative`` as :class:`~gearjax._studies.sensitivity.Sensitivity`;
     ``frequencies_hz``, ``point_values`` ``(n,)`` (NaN where refused),
     ``point_gradients`` ``(n, p)`` (NaN rows where refused), ``weights`` ``(n,)``:
     ``dR/dr_i``; ``excluded``: ``{frequency_hz: reason}`` of the refused points;
@@ -65,6 +66,9 @@ class BandSensitivity:
     response: str
     harmonics: int | tuple[int, ...]
     torus: dict | None = None
+    steps: np.ndarray | None = None
+    step_rules: tuple[str | None, ...] = ()
+    relative: np.ndarray | None = None
 
 
 def band_sensitivity(
@@ -128,7 +132,9 @@ def band_sensitivity(
         pg, stable, distance = gp.differentiate(sol, fi, resp, fold_tol)
         raw[i] = float(pg.value)
         try:
-            check_point(stable, distance, f"{fi:g} Hz", fold_tol, torus=gp.torus is not None)
+            check_point(stable, distance, f"{fi:g} Hz", fold_tol, torus=gp.torus is not None,
+                        linear=gp.linear,
+                        mode=gp.refusal_mode(sol, fi, stable, distance, fold_tol))
         except SensitivityRefused as e:
             excluded[float(fi)] = str(e)
             continue
@@ -160,9 +166,12 @@ def band_sensitivity(
         w[keep] = dw
         value = float(np.sum(dw * vals[keep]))
     d = np.sum(w[keep, None] * grads[keep], axis=0)
+    steps, rules = parameter_steps(train, gp.paths, np.asarray(gp.theta))
     return BandSensitivity(
         objective=objective, temperature=temperature if objective == "peak" else None, tau=tau,
         value=float(value), paths=gp.paths, values=np.asarray(gp.theta), derivative=d,
-        normalised=normalise(d, np.asarray(gp.theta), float(value)), frequencies_hz=f,
+        normalised=normalise(d, np.asarray(gp.theta), float(value),
+                             [r is not None for r in rules]), frequencies_hz=f,
         point_values=vals, point_gradients=grads, weights=w, excluded=excluded,
-        mesh=mesh, response=response, harmonics=gp.settings.n_harmonics, torus=gp.torus)
+        mesh=mesh, response=response, harmonics=gp.settings.n_harmonics, torus=gp.torus,
+        steps=steps, step_rules=rules, relative=relative_change(d, steps, float(value)))

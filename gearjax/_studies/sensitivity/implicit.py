@@ -18,9 +18,14 @@ Where the derivative is refused (:func:`check_point`):
 
 - the point is at or near a fold: there ``J`` is singular and ``dy/dp`` unbounded. The
   test is a Floquet multiplier within ``fold_tol`` (default :data:`FOLD_TOL`) of +1
-  (:func:`point_status` says why not the singular values of ``J``);
+  (:func:`point_status` says why not the singular values of ``J``). A linear system
+  (no backlash) has no fold: there a multiplier that close to +1 comes from a lightly
+  damped mode, near-rigid (slow against the response period) or in resonance with a
+  harmonic of the response, which makes ``J`` nearly singular and the derivative
+  ill-conditioned; the refusal names that mode (:func:`slow_mode`);
 - the periodic solution is unstable (Floquet multipliers, :func:`gearjax.stability`):
-  it is not the response a gearbox shows.
+  it is not the response a gearbox shows (in a linear system: a parametric
+  instability, unbounded).
 
 (A point that did not converge has no derivative either; the studies say so before
 asking.)
@@ -35,16 +40,19 @@ that of the force at the sample where the peak is.
 
 from __future__ import annotations
 
+import math
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from ..._engine import hb as _hb
 from ..._engine.adjoint import implicit_coefficients
 from ..._engine.newton import newton
 from ..._engine.results import RESULTS, result_word
-from ..._engine.verdict import stability
+from ..._engine.verdict import scaled_monodromy, stability, verdict, verdict_basis
 
 FOLD_TOL = 0.05
 """Smallest distance ``min |mu - 1|`` of the Floquet multipliers ``mu`` from +1 accepted
@@ -165,22 +173,101 @@ def point_status(problem: _hb.HBProblem, X: Array, omega) -> tuple[Array, Array]
     return s.stable, jnp.min(jnp.where(s.excluded, jnp.inf, jnp.abs(s.multipliers - 1.0)))
 
 
+def slow_mode(problem: _hb.HBProblem, X: Array, omega) -> dict:
+    """The mode behind the Floquet multiplier nearest +1 of the solution ``X`` ``(C, n)``
+    at ``omega`` (rad/s), of those the verdict keeps (:func:`gearjax.stability`): the
+    mode of the mean-stiffness model (:func:`gearjax._engine.modal.mode_classes`) that
+    holds the largest share of that Floquet mode (in the mass norm).
+
+    **Returns:** ``{"hz", "damping_ratio", "share", "harmonic", "response_hz",
+    "multiplier", "distance", "max_multiplier"}``: the mode's natural frequency (Hz)
+    and modal damping ratio ``phi^T (C + W^T diag(c) W) phi / (2 w)`` (``phi``
+    mass-normalised; ``c`` the mesh damping; ``None`` for ``w = 0``), its share of the Floquet mode, the
+    harmonic of the response frequency ``response_hz`` nearest to it (0: a near-rigid
+    mode, slow against the response period), the multiplier, its distance from +1,
+    and the largest retained multiplier modulus. Host NumPy (one eigen-decomposition
+    of the monodromy matrix)."""
+    s = problem.system
+    basis = verdict_basis(problem)
+    Phi = np.asarray(scaled_monodromy(problem, basis, X, jnp.asarray(omega)))
+    mu, V = np.linalg.eig(Phi)
+    mu, V = mu.astype(complex), V.astype(complex)
+    st = verdict(problem, basis, jnp.asarray(mu), jnp.asarray(V))
+    kept = ~np.asarray(st.excluded)
+    mults = np.asarray(st.multipliers)
+    distance = np.where(kept, np.abs(mults - 1.0), np.inf)
+    k = int(np.argmin(distance))
+    dz = np.asarray(basis.frame.Linv).T @ V[: s.n_dof, k]
+    modal = np.asarray(basis.modal)
+    content = np.abs(modal.T @ (np.asarray(s.M) @ dz)) ** 2
+    i = int(np.argmax(content))
+    phi = modal[:, i]
+    w = math.sqrt(max(float(phi @ np.asarray(s.mean_stiffness()) @ phi), 0.0))
+    W = np.asarray(s.W)
+    C = np.asarray(s.C) + W.T @ (np.asarray(s.damping)[:, None] * W)
+    zeta = float(phi @ C @ phi) / (2 * w) if w > 0 else None  # None: a rigid-body mode
+    response_hz = float(omega) / (2 * math.pi * problem.settings.eta)
+    hz = w / (2 * math.pi)
+    return {"hz": hz, "damping_ratio": zeta,
+            "share": float(content[i] / np.sum(content)) if np.sum(content) > 0 else 0.0,
+            "harmonic": int(round(hz / response_hz)), "response_hz": response_hz,
+            "multiplier": [float(mults[k].real), float(mults[k].imag)],
+            "distance": float(distance[k]),
+            "max_multiplier": float(np.max(np.abs(mults[kept]))) if kept.any() else None}
+
+
+LIGHT_DAMPING = 0.05
+"""Modal damping ratio below which :func:`check_point` calls a mode lightly damped."""
+
+
 def check_point(stable, fold_distance, where: str, fold_tol: float = FOLD_TOL, *,
-                torus: bool = False) -> None:
+                torus: bool = False, linear: bool = False, mode: dict | None = None) -> None:
     """Raise :class:`SensitivityRefused` when the point ``where`` (e.g. ``"3000 Hz"``) is
     at or near a fold (``fold_distance < fold_tol``) or unstable; ``torus``: the solution
-    is quasi-periodic (the message says so)."""
+    is quasi-periodic (the message says so). A ``linear`` point (no backlash) has no
+    fold: a multiplier within ``fold_tol`` of +1 is refused as ``lightly_damped_mode``,
+    naming the mode ``mode`` (:func:`slow_mode`) where given, and an unstable one as a
+    parametric instability (unbounded)."""
     d = float(fold_distance)
     mult = ("a multiplier per turn of the base angle (the near-return monodromy's q-th "
             "root)" if torus else "a Floquet multiplier")
+    if not d >= fold_tol and linear:
+        raise SensitivityRefused(RESULTS.lightly_damped_mode, (
+            f"the linear response at {where} has no fold, but {_mode_words(mode)} puts "
+            f"{mult} {d:.2g} from +1, closer than {fold_tol:g}: its derivatives there are "
+            "dominated by that mode and ill-conditioned; choose another frequency, or "
+            "damp or stiffen that mode"))
     if not d >= fold_tol:
         raise SensitivityRefused(RESULTS.fold, (
             f"the point at {where} is at or near a fold of the response curve ({mult} lies "
             f"{d:.2g} from +1, closer than {fold_tol:g}): the response jumps "
             "there and is not a differentiable function of the parameters; choose a "
             "frequency away from the fold"))
+    if not bool(stable) and linear:
+        top = None if mode is None else mode.get("max_multiplier")
+        size = "" if top is None else f", largest |mu| = {top:.4f}"
+        raise SensitivityRefused(RESULTS.unstable, (
+            f"the linear response at {where} has a parametric instability (unbounded: "
+            f"{mult} lies outside the unit circle{size}): any disturbance grows without "
+            "bound there, so its derivatives describe no response the train shows"))
     if not bool(stable):
         kind = "quasi-periodic (torus)" if torus else "periodic"
         raise SensitivityRefused(RESULTS.unstable, (
             f"the {kind} solution at {where} is unstable ({mult} lies outside "
             "the unit circle): its derivatives describe no response the train shows"))
+
+
+def _mode_words(mode: dict | None) -> str:
+    """The mode of :func:`slow_mode` in words."""
+    if mode is None:
+        return "a lightly damped mode"
+    zeta = mode["damping_ratio"]
+    if zeta is None:
+        return f"a rigid-body mode ({mode['hz']:.4g} Hz, undamped)"
+    light = "lightly damped " if zeta < LIGHT_DAMPING else ""
+    if mode["harmonic"] == 0:
+        return (f"a {light}near-rigid mode ({mode['hz']:.4g} Hz, damping ratio {zeta:.2g}, "
+                f"slow against the response at {mode['response_hz']:.4g} Hz)")
+    return (f"a {light}mode at {mode['hz']:.4g} Hz (damping ratio {zeta:.2g}) in resonance "
+            f"with harmonic {mode['harmonic']} of the response "
+            f"({mode['harmonic'] * mode['response_hz']:.4g} Hz)")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .point import Sensitivity
+from .steps import RANKING_RULE
 
 
 def path_unit(path: str) -> str:
@@ -23,11 +24,15 @@ def path_unit(path: str) -> str:
 
 
 def sensitivity_json(result: Sensitivity, top: int | None = None) -> dict:
-    """The ``sensitivity`` JSON: point fields and ``derivatives``, ranked by
-    ``|normalised|`` (each ``{path, value, unit, derivative, derivative_unit,
-    normalised}``; ``reason`` where ``normalised`` is null); ``harmonics`` is K, or on a
-    torus the list of orders per angle, and ``torus`` what the torus study solved
-    (:func:`~gearjax._gear.case.torus_fields`; null for a periodic gear)."""
+    """The ``sensitivity`` JSON: point fields and ``derivatives``, ranked by ``|relative|``
+    (``ranking`` says the rule, :data:`~gearjax._studies.sensitivity.steps.RANKING_RULE`;
+    each ``{path, value, unit, derivative, derivative_unit, normalised, step, step_rule,
+    relative}``: ``normalised`` is ``(p/R) dR/dp``, null with a ``reason`` where it means
+    nothing; ``step`` (in ``unit``) and ``step_rule`` (null: the value itself) what
+    ``relative = (step/R) dR/dp`` is taken over); ``harmonics`` is K, or on a torus the
+    list of orders per angle, and ``torus`` what the torus study solved
+    (:func:`~gearjax._gear.case.torus_fields`; null for a periodic gear); ``mode``: the
+    mode a linear point was refused for (null otherwise)."""
     out = {
         "gear": result.gear,
         "reference_stage": result.reference_stage,
@@ -46,7 +51,9 @@ def sensitivity_json(result: Sensitivity, top: int | None = None) -> dict:
         "fold_distance": result.fold_distance,
         "fold_tol": result.fold_tol,
         "reason": result.message,
+        "mode": result.mode,
         "mesh_values": {m: float(v) for m, v in zip(result.meshes, result.mesh_values)},
+        "ranking": RANKING_RULE,
         "derivatives": [],
         "torus": result.torus,
     }
@@ -54,17 +61,29 @@ def sensitivity_json(result: Sensitivity, top: int | None = None) -> dict:
         out["derivatives"] = None
         return out
     rows = []
+    rules = result.step_rules or (None,) * len(result.paths)
     for k in result.ranking()[:top]:
         path = result.paths[k]
         unit = path_unit(path)
         row = {"path": path, "value": float(result.values[k]), "unit": unit,
                "derivative": float(result.derivative[k]),
                "derivative_unit": f"{result.unit} per {unit}",
-               "normalised": float(result.normalised[k])}
+               "normalised": float(result.normalised[k]),
+               "step": None if result.steps is None else float(result.steps[k]),
+               "step_rule": rules[k],
+               "relative": None if result.relative is None else _finite(result.relative[k])}
         if not np.isfinite(result.normalised[k]):
             row["normalised"] = None
-            row["reason"] = ("the parameter is 0: no relative change (use the derivative)"
-                             if result.values[k] == 0 else "the response is 0")
+            row["reason"] = (
+                "the angle's origin is a convention: its relative change means nothing "
+                f"(ranked over its step: {rules[k]})" if rules[k] is not None
+                else "the parameter is 0: no relative change (use the derivative)"
+                if result.values[k] == 0 else "the response is 0")
         rows.append(row)
     out["derivatives"] = rows
     return out
+
+
+def _finite(x) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None

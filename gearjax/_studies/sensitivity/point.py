@@ -27,7 +27,8 @@ from .. import harmonics as _harmonics
 from ..sweep import backlash_start
 from .family import RESPONSE_UNITS, GearFamily, MeshResponse, check_paths, response_field
 from .implicit import (FOLD_TOL, SensitivityRefused, check_point, implicit_gradient,
-                       point_status, solve_at)
+                       point_status, slow_mode, solve_at)
+from .steps import parameter_steps, relative_change
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,16 +42,27 @@ class Sensitivity:
       ``int``, or on a torus the orders per angle, a tuple), ``linear``;
     - ``response`` (``rms`` | ``max`` | ``dlf``), ``unit``, ``mesh`` (name such as
       ``1.sp1``), ``value``: the response there (NaN when not converged);
-    - ``result``: ``ok``, ``not_converged``, ``fold`` or ``unstable``; ``message``:
+    - ``result``: ``ok``, ``not_converged``, ``fold``, ``lightly_damped_mode`` (a linear
+      point's multiplier near +1, :func:`~gearjax._studies.sensitivity.check_point`) or
+      ``unstable``; ``message``:
       why a point was refused (``None`` when ok); ``converged``, ``stable``,
       ``fold_distance`` (:func:`point_status`), ``fold_tol``;
     - ``paths``: the TOML paths; ``values``: their values (file units);
-      ``derivative``: ``dR/dp`` per unit of each path (``None`` when refused);
-      ``normalised``: ``(p / R) dR/dp`` (NaN where ``p`` or ``R`` is 0);
-      ``partial``: the explicit part ``dr/dp`` at fixed solution;
+      ``derivative``: ``dR/dp`` per unit of each path (``None`` when refused; a planet
+      angle's or a phase's per degree);
+      ``normalised``: ``(p / R) dR/dp`` (NaN where ``p`` or ``R`` is 0, and for an angle
+      whose origin is a convention: planet angles and phases, whose relative change
+      means nothing); ``partial``: the explicit part ``dr/dp`` at fixed solution;
     - ``meshes``: every mesh name; ``mesh_values``: the response of every mesh;
     - ``torus``: what a torus study solves (:func:`~gearjax._gear.case.torus_fields`:
-      ``G``, angle ratios, truncation, near return); ``None`` for a periodic gear.
+      ``G``, angle ratios, truncation, near return); ``None`` for a periodic gear;
+    - ``steps``: the step ``s`` of each path that ranks it (file units,
+      :func:`~gearjax._studies.sensitivity.steps.parameter_steps`: its value, one
+      assembly slot of a planet angle, one mesh cycle of a phase); ``step_rules``:
+      ``None`` where ``s`` is the value, else the rule in words; ``relative``: ``(s /
+      R) dR/dp``, what :meth:`ranking` ranks (``None`` when refused);
+    - ``mode``: where a linear point is refused next to a lightly damped mode, that mode
+      (:func:`~gearjax._studies.sensitivity.implicit.slow_mode`), else ``None``.
     """
 
     gear: str
@@ -77,18 +89,24 @@ class Sensitivity:
     meshes: tuple[str, ...]
     mesh_values: np.ndarray
     torus: dict | None = None
+    steps: np.ndarray | None = None
+    step_rules: tuple[str | None, ...] = ()
+    relative: np.ndarray | None = None
+    mode: dict | None = None
 
     @property
     def ok(self) -> bool:
         return self.result == "ok"
 
     def ranking(self) -> list[int]:
-        """Indices of ``paths`` by decreasing ``|normalised|`` (undefined ones last, by
-        decreasing ``|derivative|``)."""
+        """Indices of ``paths`` by decreasing ``|relative|``, ``(s / R) dR/dp`` with each
+        path's step ``s`` (:data:`~gearjax._studies.sensitivity.steps.RANKING_RULE`;
+        independent of any angle's origin), undefined ones last, by decreasing
+        ``|derivative|``."""
         if self.derivative is None:
             return list(range(len(self.paths)))
-        norm = np.abs(self.normalised)
-        key = [(0, -norm[k]) if np.isfinite(norm[k]) else (1, -abs(self.derivative[k]))
+        rel = np.abs(self.normalised if self.relative is None else self.relative)
+        key = [(0, -rel[k]) if np.isfinite(rel[k]) else (1, -abs(self.derivative[k]))
                for k in range(len(self.paths))]
         return sorted(range(len(self.paths)), key=lambda k: key[k])
 
@@ -170,6 +188,15 @@ class GearPoint:
         stable, distance = point_status(self.problem, sol.X, omega)
         return pg, bool(stable), float(distance)
 
+    def refusal_mode(self, sol, f_hz, stable, distance, fold_tol) -> dict | None:
+        """Where a linear point will be refused (a multiplier within ``fold_tol`` of +1,
+        or unstable), the mode behind it
+        (:func:`~gearjax._studies.sensitivity.implicit.slow_mode`), which the refusal
+        names; ``None`` otherwise (a point with backlash names no mode)."""
+        if not self.linear or (distance >= fold_tol and stable):
+            return None
+        return slow_mode(self.problem, sol.X, jnp.asarray(self.omega(f_hz)))
+
 
 @eqx.filter_jit
 def _problem_jit(family, theta, settings):
@@ -223,7 +250,10 @@ def sensitivity(
     coexisting solutions it is the one a sweep starting at ``at_hz`` would start on.
 
     **Returns:** :class:`Sensitivity`; a refused point has ``result`` ``not_converged``,
-    ``fold`` or ``unstable``, a ``message`` naming the frequency, and no derivative.
+    ``fold``, ``lightly_damped_mode`` or ``unstable``, a ``message`` naming the
+    frequency (and for a linear point the mode behind it), and no derivative. The
+    derivatives are ranked by a rule independent of any angle's origin
+    (:meth:`Sensitivity.ranking`).
 
     **Raises:** ``ArgumentError`` (a ``TrainError``) naming the argument for bad
     ``paths``, ``response``, ``mesh``, ``at_hz`` or ``harmonics``; ``TrainError`` as
@@ -248,6 +278,8 @@ def sensitivity(
                   mesh=gp.system.mesh_labels[j], value=float(values[j]), converged=converged,
                   paths=gp.paths, values=np.asarray(gp.theta),
                   meshes=tuple(gp.system.mesh_labels), mesh_values=values, torus=gp.torus)
+    steps, rules = parameter_steps(train, gp.paths, np.asarray(gp.theta))
+    common.update(steps=steps, step_rules=rules)
     refused = dict(derivative=None, normalised=None, partial=None)
     if not converged:
         return Sensitivity(**common, **refused, result=result_word(RESULTS.not_converged),
@@ -258,19 +290,30 @@ def sensitivity(
     pg, stable, distance = gp.differentiate(sol, at_hz, MeshResponse(field=field, mesh=j),
                                             fold_tol)
     status = dict(stable=stable, fold_distance=distance)
+    mode = gp.refusal_mode(sol, at_hz, stable, distance, fold_tol)
     try:
-        check_point(stable, distance, f"{at_hz:g} Hz", fold_tol, torus=gp.torus is not None)
+        check_point(stable, distance, f"{at_hz:g} Hz", fold_tol, torus=gp.torus is not None,
+                    linear=linear, mode=mode)
     except SensitivityRefused as e:
-        return Sensitivity(**common, **refused, **status, result=e.result, message=str(e))
+        return Sensitivity(**common, **refused, **status, result=e.result, message=str(e),
+                           mode=mode)
     d = np.asarray(pg.gradient)
     return Sensitivity(**common, **status, result="ok", message=None, derivative=d,
-                       normalised=normalise(d, np.asarray(gp.theta), float(pg.value)),
-                       partial=np.asarray(pg.partial))
+                       normalised=normalise(d, np.asarray(gp.theta), float(pg.value),
+                                            [r is not None for r in rules]),
+                       partial=np.asarray(pg.partial),
+                       relative=relative_change(d, steps, float(pg.value)))
 
 
-def normalise(derivative: np.ndarray, values: np.ndarray, response: float) -> np.ndarray:
-    """``(p / R) dR/dp``; NaN where ``p == 0`` or ``R == 0`` (no relative change)."""
+def normalise(derivative: np.ndarray, values: np.ndarray, response: float,
+              arbitrary_origin=None) -> np.ndarray:
+    """``(p / R) dR/dp``; NaN where ``p == 0`` or ``R == 0`` (no relative change) and where
+    ``arbitrary_origin`` (``(p,)`` bool, default none) marks an angle whose origin is a
+    convention (a planet angle, a phase: :mod:`~gearjax._studies.sensitivity.steps`),
+    whose relative change means nothing."""
     ok = (values != 0) & (response != 0)
+    if arbitrary_origin is not None:
+        ok = ok & ~np.asarray(arbitrary_origin, bool)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(ok, derivative * values / (response if response != 0 else 1.0), np.nan)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable
 
 import jax.numpy as jnp
@@ -14,6 +15,7 @@ from ..._gear.toml_io import dumps_train
 from ..._gear.train import Train
 from .. import concurrency
 from .. import harmonics as _harmonics
+from ..validity import ContactLossWarning, contact_loss
 from . import completion as _completion
 from . import seeds as _seeds
 from . import segments as _segments
@@ -21,6 +23,7 @@ from . import speculation as _speculation
 from . import walk as _walk
 from .arguments import check_arguments
 from .context import Context
+from .default_band import resolve_band
 from .dataset import point_data, sweep_result_dataset
 from .post import PostStream
 from .progress import with_branches
@@ -32,8 +35,8 @@ from .summary import SweepResult
 def sweep(
     train: Train,
     gear: str | None = None,
-    from_hz: float = 2000.0,
-    to_hz: float = 15000.0,
+    from_hz: float | None = None,
+    to_hz: float | None = None,
     *,
     stage: str | None = None,
     linear: bool = False,
@@ -52,7 +55,9 @@ def sweep(
     complete: bool = True,
     seeds: int = 0,
 ) -> SweepResult:
-    """Frequency response of ``gear`` from ``from_hz`` to ``to_hz`` (reference-stage mesh Hz).
+    """Frequency response of ``gear`` from ``from_hz`` to ``to_hz`` (reference-stage mesh Hz;
+    both ``None``: the band chosen from the gear's modes and excitation orders,
+    :mod:`~gearjax._studies.sweep.default_band`, said through ``say``).
 
     **Arguments:** ``stage``: reference stage id (default: first turning stage);
     ``linear``: drop the backlash; ``harmonics``: fixed K (default: frequency-dependent,
@@ -111,9 +116,16 @@ def sweep(
     a ``journal``; ``TrainError`` for a gear where no mesh turns, an impractical ``mu``,
     an unknown stage, backlash on an unloaded stage without ``drag_torque``, or a
     journal that cannot be resumed.
+
+    **Warns:** :class:`~gearjax._studies.validity.ContactLossWarning` where a linear
+    sweep's alternating mesh force exceeds the static one (the teeth would leave
+    contact), naming the first frequency (:func:`~gearjax._studies.validity.contact_loss`).
     """
     t_start = time.perf_counter()
     phases = Phases()
+    from_hz, to_hz, chosen = resolve_band(train, gear, stage, linear, from_hz, to_hz)
+    if chosen is not None and say is not None:
+        say(f"band {from_hz:.1f}-{to_hz:.1f} Hz, chosen {chosen}")
     check_arguments(from_hz, to_hz, eta=eta, smoothing=smoothing, harmonics=harmonics,
                     max_step_hz=max_step_hz, points=points, max_points=max_points,
                     seeds=seeds)
@@ -159,6 +171,7 @@ def sweep(
         raise
     phases.end("check")
     solver = {"method": "harmonic balance", "linear": linear, "eta": eta,
+              "band_hz": [float(from_hz), float(to_hz)],
               "segments": [[a, b, _segments.orders_json(K)] for a, b, K in segments],
               "reference_stage": case.stage,
               "max_step_hz": max_step_hz, "cutoff_hz": cutoff_hz,
@@ -187,6 +200,9 @@ def sweep(
                               command="" if command is None else command,
                               branches=branches)
     phases.end("results")
+    loss = contact_loss(ds)
+    if loss is not None:
+        warnings.warn(ContactLossWarning(loss["warning"]), stacklevel=2)
     return SweepResult(dataset=ds, folds_hz=tuple(folds), stop=walk.stop,
                        segments=tuple(walk.segments), seconds=time.perf_counter() - t_start,
                        restarts=tuple(walk.restarts), branches=tuple(branches or ()),

@@ -77,7 +77,7 @@ def sweep_result_dataset(data: dict, case, *, F_static, train_toml: str, solver:
     stage_hz = np.outer(omegas / (2 * math.pi), np.asarray(case.mu, float))
     system = case.system
     bif = bifurcations(f_ref, data["stable"], data["multipliers"], data["excluded"],
-                       data["branch"], torus=system.n_angles > 1)
+                       data["branch"], torus=system.n_angles > 1, linear=bool(case.linear))
     ds = sweep_dataset(
         data["responses"], **mesh_coordinates(system),
         mesh_frequency_hz=f_ref,

@@ -156,11 +156,12 @@ def point_arrays(problem, omega_ref: float, pts: list[dict]):
     return Xs, jnp.asarray(np.array([p["lam"] for p in pts]) * omega_ref)
 
 
-def bifurcations(f_hz, stable, multipliers, excluded, branch=None, torus: bool = False
-                 ) -> list[dict]:
+def bifurcations(f_hz, stable, multipliers, excluded, branch=None, torus: bool = False,
+                 linear: bool = False) -> list[dict]:
     """Where stability changes between neighbouring points of one branch, and how
     (interface: a list of ``{"mesh_frequency_hz", "kind"}``, the frequency the midpoint
-    of the two points).
+    of the two points), with ``multiplier``: the largest retained ``|mu|`` of the
+    unstable one of the two points (``None`` where not finite).
 
     ``kind`` is from :func:`~gearjax._engine.verdict.bifurcation_kind`: ``fold``,
     ``period_doubling`` or ``neimark_sacker`` (``None`` where no retained multiplier
@@ -168,6 +169,13 @@ def bifurcations(f_hz, stable, multipliers, excluded, branch=None, torus: bool =
     :class:`~gearjax._engine.verdict.Stability`). On a ``torus`` the multipliers are
     growths per turn of the base angle whose phases mean nothing (``verdict``): the kind
     is ``None`` (a stability change) there.
+
+    A ``linear`` system (no backlash) has no fold, period doubling or torus: its
+    solution is unique, and a multiplier outside the unit circle means that any
+    disturbance grows without bound, a parametric instability. There ``kind`` is
+    ``"parametric_instability"`` and ``crossing`` says how the multiplier left the
+    circle (the kind above: ``period_doubling`` through -1, ``neimark_sacker`` a complex
+    pair, ``fold`` through +1; ``None`` on a torus).
     """
     out = []
     stable = np.asarray(stable, dtype=float)  # NaN: unknown (e.g. a runaway point)
@@ -177,8 +185,19 @@ def bifurcations(f_hz, stable, multipliers, excluded, branch=None, torus: bool =
     for i in np.flatnonzero(change):
         kind = None if torus else bifurcation_kind(multipliers[i][~excluded[i]],
                                                    multipliers[i + 1][~excluded[i + 1]])
-        out.append({"mesh_frequency_hz": float((f_hz[i] + f_hz[i + 1]) / 2), "kind": kind})
+        u = i if stable[i] == 0 else i + 1  # the unstable one of the two
+        mu = np.abs(np.asarray(multipliers[u])[~np.asarray(excluded[u])])
+        top = float(np.max(mu)) if mu.size and np.all(np.isfinite(mu)) else None
+        entry = {"mesh_frequency_hz": float((f_hz[i] + f_hz[i + 1]) / 2), "kind": kind,
+                 "multiplier": top}
+        if linear:
+            entry.update(kind=PARAMETRIC, crossing=kind)
+        out.append(entry)
     return out
+
+
+PARAMETRIC = "parametric_instability"
+"""The ``kind`` of a linear system's stability change (:func:`bifurcations`)."""
 
 
 @kept_program
