@@ -35,8 +35,9 @@ class RESULTS(optx.RESULTS):  # type: ignore[misc]
                       "corrector converging.")
     closed_loop = "The branch came back onto a stretch it had traced, in the same direction."
     detour = "The branch stopped advancing in the parameter (it turned back or wandered)."
-    runaway = ("The branch's alternating mesh deflection exceeded its runaway bound (a "
-               "parametric instability).")
+    runaway = ("The branch's alternating mesh deflection exceeded its runaway bound (five "
+               "times the static deflection plus the backlash: inside or at the edge of a "
+               "parametric instability, or a resonance beyond what the model describes).")
     no_converged_start = "No converged point was found where the segment starts."
     fold = "The point lies at a fold of the branch: its derivative is unbounded there."
     unstable = "The periodic state is unstable: no test rig settles onto it."
