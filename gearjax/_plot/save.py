@@ -78,7 +78,7 @@ def plot_sweep(ds, path: str, what: str = "rms", title: str = ""):
     from matplotlib.lines import Line2D
 
     var, label = WHAT[what]
-    f = np.asarray(ds["mesh_frequency_hz"]) / 1e3
+    f = np.asarray(ds["mesh_frequency_hz"]) / frequency_unit(ds)[0]
     stable = np.asarray(ds["stable"]) if "stable" in ds else np.full(f.shape, -1)
     branch = np.asarray(ds["branch"]) if "branch" in ds else np.zeros(f.shape, int)
     fig, axes, panels = _mesh_panels(ds, label)
@@ -159,15 +159,27 @@ def _mesh_panels(ds, ylabel: str):
     return fig, axes, panels
 
 
+def frequency_unit(ds) -> tuple[float, str]:
+    """``(scale, unit)`` of a frequency axis that fits the points of ``ds``: kHz from
+    1 kHz up, Hz below (a wind turbine's meshes run at tens of Hz)."""
+    f = np.asarray(ds["mesh_frequency_hz"], dtype=float)
+    top = float(np.nanmax(np.abs(f))) if f.size and np.isfinite(f).any() else 0.0
+    return (1e3, "kHz") if top >= 1e3 else (1.0, "Hz")
+
+
 def _finish(fig, axes, ds, path, title: str, styles=()) -> None:
-    """Frequency labels, title, and one legend below the panels (the first panel's
-    entries, one per planet, then ``styles``: proxy artists of the line and marker
-    styles); save to ``path`` and close."""
+    """Frequency labels, title, and one legend below the panels (one entry per planet
+    number of any stage, in its colour, then ``styles``: proxy artists of the line and
+    marker styles); save to ``path`` and close."""
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     for ax in axes[-1]:
-        ax.set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency (kHz)")
-    handles = axes[0, 0].get_legend_handles_labels()[0] + list(styles)
+        ax.set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency "
+                      f"({frequency_unit(ds)[1]})")
+    planets = sorted({int(p) for p in np.asarray(ds["planet"]).tolist()})
+    handles = [Line2D([], [], color=f"C{(p - 1) % 10}", lw=1.0, label=f"planet {p}")
+               for p in planets] + list(styles)
     if handles:
         fig.legend(handles=handles, loc="outside lower center",
                    ncol=len(handles) if len(handles) <= 5 else -(-len(handles) // 2),
@@ -204,7 +216,7 @@ def plot_points(ds, path: str, line=None, title: str = "", what: str = "rms"):
     from matplotlib.lines import Line2D
 
     var, ylabel = WHAT[what]
-    f_pts = np.asarray(ds["mesh_frequency_hz"]) / 1e3
+    f_pts = np.asarray(ds["mesh_frequency_hz"]) / frequency_unit(ds)[0]
     settled = np.asarray(ds["converged"])
     names = np.asarray(ds["mesh"]).tolist()
     fig, axes, panels = _mesh_panels(ds, ylabel)

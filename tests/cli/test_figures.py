@@ -95,3 +95,34 @@ def test_cli_figures_have_labelled_axes_and_the_legend_below(tmp_path, monkeypat
         labels = [t.get_text() for t in fig.legends[0].get_texts()]
         assert "stable" in labels and "unstable" in labels
         assert matplotlib.image.imread(out).shape[0] > 500
+
+
+def test_the_legend_covers_every_planet_count_and_slow_gears_read_in_hz(tmp_path,
+                                                                        monkeypatch):
+    """Stage 1 with three planets, stage 2 with four, meshes at 30-45 Hz (a wind
+    turbine's low-speed stage): every planet number is in the legend, in the colour it
+    is drawn with, and the frequency axis reads in Hz, not 0.03-0.045 kHz."""
+    meshes = ([f"1.sp{i}" for i in (1, 2, 3)] + [f"1.rp{i}" for i in (1, 2, 3)]
+              + [f"2.sp{i}" for i in (1, 2, 3, 4)] + [f"2.rp{i}" for i in (1, 2, 3, 4)])
+    f = np.linspace(30.0, 45.0, 6)
+    ds = xr.Dataset(
+        {"mesh_frequency_hz": ("point", f), "stable": ("point", np.ones(6, np.int8)),
+         "branch": ("point", np.zeros(6, int)), "converged": ("point", np.ones(6, bool)),
+         "rms_force": (("point", "mesh"), np.outer(1 + f / 100, np.arange(1, 15)))},
+        coords={"mesh": meshes, "stage": ("mesh", [m[0] for m in meshes]),
+                "side": ("mesh", ["sun" if ".sp" in m else "ring" for m in meshes]),
+                "planet": ("mesh", [int(m[-1]) for m in meshes])},
+        attrs={"reference_stage": "1"})
+    figures = []
+    monkeypatch.setattr("matplotlib.figure.Figure.savefig",
+                        lambda fig, *a, **k: figures.append(fig))
+    _save.plot_sweep(ds, str(tmp_path / "sweep.png"))
+    (fig,) = figures
+    legend = fig.legends[0]
+    labels = [t.get_text() for t in legend.get_texts()]
+    assert [l for l in labels if l.startswith("planet")] == [f"planet {p}" for p in (1, 2, 3, 4)]
+    drawn = {line.get_color() for ax in fig.axes for line in ax.get_lines()}
+    shown = {h.get_color() for h, l in zip(legend.legend_handles, labels)
+             if l.startswith("planet")}
+    assert drawn <= shown | {"0.3"}
+    assert all(ax.get_xlabel().endswith("mesh frequency (Hz)") for ax in fig.axes[-2:])
