@@ -159,6 +159,21 @@ def _mesh_panels(ds, ylabel: str):
     return fig, axes, panels
 
 
+MIN_SPAN = 0.02
+"""Least height of a panel's y axis relative to the largest magnitude it shows: a
+variation of 0.1% of the values then fills a twentieth of the panel, not all of it."""
+
+
+def _not_a_trend(ax) -> None:
+    """Widen ``ax``'s y range to :data:`MIN_SPAN` of its values' magnitude where it is
+    narrower, about its middle, so a flat curve is drawn flat."""
+    lo, hi = ax.get_ylim()
+    size = max(abs(lo), abs(hi))
+    if size > 0 and hi - lo < MIN_SPAN * size:
+        mid = (lo + hi) / 2
+        ax.set_ylim(mid - MIN_SPAN * size / 2, mid + MIN_SPAN * size / 2)
+
+
 def frequency_unit(ds) -> tuple[float, str]:
     """``(scale, unit)`` of a frequency axis that fits the points of ``ds``: kHz from
     1 kHz up, Hz below (a wind turbine's meshes run at tens of Hz)."""
@@ -177,6 +192,8 @@ def _finish(fig, axes, ds, path, title: str, styles=()) -> None:
     for ax in axes[-1]:
         ax.set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency "
                       f"({frequency_unit(ds)[1]})")
+    for ax in axes.ravel():
+        _not_a_trend(ax)
     planets = sorted({int(p) for p in np.asarray(ds["planet"]).tolist()})
     handles = [Line2D([], [], color=f"C{(p - 1) % 10}", lw=1.0, label=f"planet {p}")
                for p in planets] + list(styles)

@@ -126,3 +126,18 @@ def test_the_legend_covers_every_planet_count_and_slow_gears_read_in_hz(tmp_path
              if l.startswith("planet")}
     assert drawn <= shown | {"0.3"}
     assert all(ax.get_xlabel().endswith("mesh frequency (Hz)") for ax in fig.axes[-2:])
+
+
+def test_a_flat_response_is_drawn_flat(tmp_path, monkeypatch):
+    """Forces that vary by 0.2 N on 9,631 N fill a twentieth of the panel at most, not
+    its whole height."""
+    ds = zigzag_sweep(0)
+    ds["rms_force"] = ds["rms_force"] * 0 + 9631.0 + np.linspace(0, 0.2, ds.sizes["point"])[:, None]
+    figures = []
+    monkeypatch.setattr("matplotlib.figure.Figure.savefig",
+                        lambda fig, *a, **k: figures.append(fig))
+    _save.plot_sweep(ds, str(tmp_path / "flat.png"))
+    for ax in figures[0].axes:
+        if ax.get_lines():
+            lo, hi = ax.get_ylim()
+            assert hi - lo >= 0.02 * 9631.0 * 0.999 and lo < 9631.0 < hi
