@@ -73,7 +73,9 @@ def plot_sweep(ds, path: str, what: str = "rms", title: str = ""):
 
     ``what``: ``rms`` (RMS alternating force, N), ``dlf``, ``separation`` (share of the
     period) or ``torque`` (mean transmitted torque, N m). One panel per stage and mesh
-    side, the planets' curves overlaid; stable solid, unstable dashed, unknown dotted.
+    side, the planets' curves overlaid; stable solid, unstable dashed, unknown dotted; a
+    sweep that used its budget of points before the band's end is marked where it
+    stopped.
     """
     from matplotlib.lines import Line2D
 
@@ -93,6 +95,11 @@ def plot_sweep(ds, path: str, what: str = "rms", title: str = ""):
     styles = [Line2D([], [], ls=ls, color="0.3", lw=1.0, label=name)
               for flag, ls, name in ((1, "-", "stable"), (0, "--", "unstable"),
                                      (-1, ":", "stability unknown")) if np.any(stable == flag)]
+    if ds.attrs.get("stop") == "max_points" and f.size:  # ended before the band's end
+        for ax in axes.ravel():
+            ax.axvline(f[-1], color="tab:red", ls="-.", lw=1.0)
+        styles.append(Line2D([], [], ls="-.", color="tab:red", lw=1.0,
+                             label="stopped here: its budget of points used"))
     _finish(fig, axes, ds, path, title or "frequency response (solid stable, dashed unstable)",
             styles)
 

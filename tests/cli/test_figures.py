@@ -141,3 +141,19 @@ def test_a_flat_response_is_drawn_flat(tmp_path, monkeypatch):
         if ax.get_lines():
             lo, hi = ax.get_ylim()
             assert hi - lo >= 0.02 * 9631.0 * 0.999 and lo < 9631.0 < hi
+
+
+def test_a_sweep_stopped_by_its_point_budget_is_marked_where_it_stopped(tmp_path,
+                                                                       monkeypatch):
+    ds = zigzag_sweep(0)
+    ds.attrs["stop"] = "max_points"
+    figures = []
+    monkeypatch.setattr("matplotlib.figure.Figure.savefig",
+                        lambda fig, *a, **k: figures.append(fig))
+    _save.plot_sweep(ds, str(tmp_path / "stopped.png"))
+    labels = [t.get_text() for t in figures[0].legends[0].get_texts()]
+    assert "stopped here: its budget of points used" in labels
+    last = float(ds["mesh_frequency_hz"][-1]) / 1e3
+    marks = [line for ax in figures[0].axes for line in ax.get_lines()
+             if line.get_linestyle() == "-." and np.allclose(line.get_xdata(), last)]
+    assert len(marks) == len([ax for ax in figures[0].axes if ax.get_lines()])
