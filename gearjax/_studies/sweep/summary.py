@@ -131,12 +131,11 @@ def coexisting_bands(ds) -> list[tuple[float, float]]:
     different states (the hysteresis between folds).
 
     A stable run is a stretch of consecutive points of one branch that are all stable
-    (``stable`` true; unknown counts as not stable), clipped to the requested band
-    (:func:`band_of`); a band is where two or more runs of at least two points overlap
-    in frequency. In ascending order; empty for a linear sweep, whose periodic solution
-    is unique."""
-    runs = [_clip(r, band_of(ds)) for r in stable_runs(ds)]
-    runs = [r for r in runs if r is not None]
+    (``stable`` true; unknown counts as not stable); a band is where two or more runs of
+    at least two points overlap in frequency, also where a branch traced past the
+    requested band's end (the states found there are states of the gear). In ascending
+    order; empty for a linear sweep, whose periodic solution is unique."""
+    runs = stable_runs(ds)
     edges = sorted([(a, 1) for a, _ in runs] + [(b, -1) for _, b in runs],
                    key=lambda e: (e[0], -e[1]))
     bands, depth, start = [], 0, 0.0
@@ -153,12 +152,6 @@ def coexisting_bands(ds) -> list[tuple[float, float]]:
         else:
             merged.append((a, b))
     return merged
-
-
-def _clip(run: tuple[float, float], band: tuple[float, float]):
-    """The part ``(a, b)`` of the run inside ``band``; ``None`` where none is."""
-    a, b = max(run[0], band[0]), min(run[1], band[1])
-    return (a, b) if a <= b else None
 
 
 def stable_runs(ds) -> list[tuple[float, float]]:
