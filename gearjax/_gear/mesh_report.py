@@ -14,7 +14,7 @@ import numpy as np
 
 from .iso6336 import iso_stiffness
 from .kinematics import kinematics
-from .mesh_stiffness import mesh_wave, planet_load, stage_contacts, tooth_forms
+from .mesh_stiffness import mesh_pair, mesh_wave, planet_load
 from .phasing import stiffness_amplitudes
 from .train import Stage, Train
 
@@ -106,9 +106,7 @@ def _side(s: Stage, side: str, H: int, load: float) -> MeshSide:
     )
     if geo is None:
         return report
-    forms = dict(zip(("sun", "planet", "ring"), tooth_forms(s)))
-    contact = stage_contacts(s)[0 if side == "sun" else 1]
-    pair = (forms["sun"], forms["planet"]) if side == "sun" else (forms["planet"], forms["ring"])
+    pair, _, contact = mesh_pair(s, side)
     # ISO's tangential load is at the reference circle: F_n r_b / r = F_n cos(alpha)
     iso = iso_stiffness(*pair, contact, geo.face_width_mm * 1e-3,
                         tangential_load_n=load * float(np.cos(np.radians(s.pressure_angle_deg))))

@@ -136,7 +136,12 @@ MESH_GEARS = {"sun": ("sun", "planet"), "ring": ("planet", "ring")}
 """Gear 1 and gear 2 of each mesh side."""
 
 
-def _side(stage: Stage, side: str):
+def mesh_pair(stage: Stage, side: str):
+    """Mesh ``side`` (``"sun"`` or ``"ring"``) of a stage with a geometry: ``(forms,
+    names, contact)``, its gear 1 and gear 2 (:data:`MESH_GEARS`) as tooth forms and
+    names, and their contact at the stage's centre distance (:func:`stage_contacts`).
+
+    **Raises:** ``ValueError`` for another ``side``."""
     if side not in MESH_GEARS:
         raise ValueError(f"side must be 'sun' or 'ring', not {side!r}")
     forms = dict(zip(("sun", "planet", "ring"), tooth_forms(stage)))
@@ -198,7 +203,7 @@ def mesh_wave(stage: Stage, side: str, n_harmonics: int, load=0.0) -> MeshWave:
 
 
 def _mesh_wave(stage: Stage, side: str, n_harmonics: int, load) -> MeshWave:
-    forms, _, contact = _side(stage, side)
+    forms, _, contact = mesh_pair(stage, side)
     if stage.geometry.relieved:
         cycle = _mesh_cycle(stage, side, load, RELIEF_SAMPLES)
         spec = jnp.fft.rfft(cycle.stiffness) / RELIEF_SAMPLES
@@ -221,7 +226,7 @@ _mesh_wave_jit = eqx.filter_jit(_mesh_wave)
 def geometric_stiffness(stage: Stage, side: str):
     """Mean stiffness (N/m) and contact ratio of mesh ``side`` without load sharing
     (every pair on the path of contact carries load; tip relief ignored)."""
-    forms, _, contact = _side(stage, side)
+    forms, _, contact = mesh_pair(stage, side)
     return _path_integrals(stage, forms, contact, 1)[0], contact.contact_ratio
 
 
@@ -251,12 +256,12 @@ def mesh_cycle(stage: Stage, side: str, load=0.0, n_samples: int = 512) -> MeshC
 
 
 def _mesh_cycle(stage: Stage, side: str, load, n_samples: int) -> MeshCycle:
-    forms, names, contact = _side(stage, side)
+    forms, names, contact = mesh_pair(stage, side)
     tau = 2 * jnp.pi * jnp.arange(n_samples) / n_samples
     s, on = _pair_positions(contact, tau)
-    lam = _compliance(stage, forms, contact, jnp.where(on, s, contact.start))
-    inv = jnp.where(on, 1.0 / lam, 0.0)
-    gap = _relief(stage, forms, names, contact, jnp.where(on, s, contact.start))
+    s = jnp.where(on, s, contact.start)  # a pair off the path: any point on it, unused
+    inv = jnp.where(on, 1.0 / _compliance(stage, forms, contact, s), 0.0)
+    gap = _relief(stage, forms, names, contact, s)
     gap = jnp.where(on, gap, 1.0)  # a pair off the path never touches
     delta, stiffness, pairs = _share(inv, gap, load)
     mean = jnp.mean(stiffness) if stage.geometry.relieved else _path_integrals(

@@ -10,17 +10,17 @@ from __future__ import annotations
 
 from .._errors import fail
 from .involute import mesh_violations
-from .mesh_stiffness import stage_contacts, tooth_forms
+from .mesh_stiffness import mesh_pair, stage_contacts
 
 
 def _mesh_rules(stage):
     """``(mesh name, rule, message)`` for each geometry rule the stage's meshes break."""
-    sun, planet, ring = tooth_forms(stage)
-    sp, rp = stage_contacts(stage)
-    return [(name, rule, message)
-            for name, pair, contact in (("sun-planet", (sun, planet), sp),
-                                        ("ring-planet", (planet, ring), rp))
-            for rule, message in mesh_violations(*pair, contact)]
+    out = []
+    for side in ("sun", "ring"):
+        pair, _, contact = mesh_pair(stage, side)
+        out += [(f"{side}-planet", rule, message)
+                for rule, message in mesh_violations(*pair, contact)]
+    return out
 
 
 def check_tooth_geometry(stage, source: str | None) -> None:

@@ -161,16 +161,25 @@ def widened(K, g: int):
     return tuple(2 * k if i == g else k for i, k in enumerate(K))
 
 
-def response_cutoff_hz(system: System) -> float:
-    """``CUTOFF_MARGIN`` times the highest elastic natural frequency (Hz) whose strain
-    energy is mostly (> 1/2) in the meshes; the highest elastic one where none is; 0
-    where the system has no elastic mode."""
+def elastic_mode_span_hz(system: System) -> tuple[float, float] | None:
+    """``(lowest, top)`` natural frequencies (Hz) of the elastic modes: ``top`` the
+    highest whose strain energy is mostly (> 1/2) in the meshes, the highest elastic one
+    where none is; ``None`` where the system has no elastic mode."""
     lam, _, shares, rigid, penalty = mode_classes(system)
     hz = np.sqrt(np.maximum(np.asarray(lam), 0.0)) / (2 * math.pi)
     elastic = ~np.asarray(rigid) & ~np.asarray(penalty)
+    if not elastic.any():
+        return None
     mesh = elastic & (np.asarray(shares["mesh"]) > 0.5)
     pick = mesh if mesh.any() else elastic
-    return CUTOFF_MARGIN * float(hz[pick].max()) if pick.any() else 0.0
+    return float(hz[elastic].min()), float(hz[pick].max())
+
+
+def response_cutoff_hz(system: System) -> float:
+    """``CUTOFF_MARGIN`` times the top elastic mode of :func:`elastic_mode_span_hz`; 0
+    where the system has no elastic mode."""
+    span = elastic_mode_span_hz(system)
+    return 0.0 if span is None else CUTOFF_MARGIN * span[1]
 
 
 def harmonics_rule(base_hz: float, min_harmonics: int, eta: int = 1, *,

@@ -82,7 +82,7 @@ def test_relieved_pairs_share_the_load_as_springs_with_gaps(stage):
     """The load sharing solves sum_j max(delta - e_j, 0) / lambda_j = F: checked against
     bisection on the same pairs, at a light and a design load."""
     s = relieved(stage)
-    forms, names, contact = ms._side(s, "sun")
+    forms, names, contact = ms.mesh_pair(s, "sun")
     tau = jnp.linspace(0, 2 * np.pi, 64, endpoint=False)
     pos, on = ms._pair_positions(contact, tau)
     lam = np.asarray(ms._compliance(s, forms, contact, jnp.where(on, pos, contact.start)))

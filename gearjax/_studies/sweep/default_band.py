@@ -15,11 +15,9 @@ from __future__ import annotations
 
 import dataclasses
 
-import numpy as np
-
-from ..._engine.modal import mode_classes
 from ..._errors import bad_argument, fail
 from ..._gear.case import GearCase, gear_case
+from ..harmonics import elastic_mode_span_hz
 
 LOW_MARGIN = 0.8
 """The band starts at this fraction of the lowest super-harmonic resonance."""
@@ -43,19 +41,15 @@ def default_band(case: GearCase) -> DefaultBand:
     **Raises:** ``TrainError`` where the gear has no elastic mode (nothing to resonate).
     """
     system = case.system
-    lam, _, shares, rigid, penalty = mode_classes(system)
-    hz = np.sqrt(np.maximum(np.asarray(lam), 0.0)) / (2 * np.pi)
-    elastic = ~np.asarray(rigid) & ~np.asarray(penalty)
-    if not elastic.any():
+    span = elastic_mode_span_hz(system)
+    if span is None:
         raise fail(case.train.source, f"gears.{case.gear.name}", case.gear.name,
                    "has no elastic mode, so no band can be chosen from its modes; give the "
                    "band (`from_hz`, `to_hz`)")
-    mesh = elastic & (np.asarray(shares["mesh"]) > 0.5)
-    top = float(hz[mesh].max() if mesh.any() else hz[elastic].max())
-    bottom = float(hz[elastic].min())
+    bottom, top = span
     ref = case.kin.stage(case.stage).mesh_frequency
     ratios = [float(s.mesh_frequency / ref) for s in case.kin.stages if s.turning]
-    H = max(int(system.k_cos.shape[-1]), 1)
+    H = max(int(system.k_cos.shape[-1]), int(system.te_cos.shape[-1]), 1)  # as the floor
     lo = LOW_MARGIN * bottom / (H * max(ratios))
     hi = HIGH_MARGIN * top / max(ratios)
     reason = (f"from the gear's elastic modes: down to {LOW_MARGIN:g} x the lowest "
