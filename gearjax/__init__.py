@@ -71,6 +71,7 @@ from ._engine import (
     WindowedResponse as WindowedResponse,
     WindowPlan as WindowPlan,
     window_plan as window_plan,
+    window_reports as window_reports,
     static_mesh_forces as static_mesh_forces,
     RESULTS as RESULTS,
     result_from_word as result_from_word,
@@ -142,6 +143,7 @@ from ._studies.validity import (
 )
 from ._studies.concurrency import threads as threads
 from ._studies.sweep import (
+    RefinementWarning as RefinementWarning,
     SweepResult as SweepResult,
     backlash_start as backlash_start,
     responses_and_stability as responses_and_stability,

@@ -381,7 +381,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="points of the even grid a linear sweep starts from (refined where "
                         "the curve bends)")
     c.add_argument("--max-points", type=int, default=3000,
-                   help="cap on the points of a continuation")
+                   help="cap on the points of a continuation, or on the points a linear "
+                        "sweep solves (its grid and the middles that refine it)")
     c.add_argument("--smoothing", type=float, default=0.0, metavar="REL",
                    help="round the backlash corners over REL x backlash (default 0: exact)")
     c.add_argument("--out", metavar="FILE.nc|.csv", help="write the results")
@@ -864,9 +865,11 @@ def _sweep_run(args, train, notes, journal) -> int:
         f"{a:.0f}-{b:.0f} K={k}" for a, b, k in result.segments))
     refinement = out["solver"].get("refinement")
     if refinement:
-        print(f"points placed where the curve needs them: {refinement['added']} added to "
-              f"the even grid, {refinement['checked']} middles checked (straight lines "
-              f"within {100 * refinement['tolerance']:g}% there)")
+        print(f"points: {refinement['grid']} of the even grid (--points {args.points}) and "
+              f"{refinement['added']} placed where a straight line missed the RMS or peak "
+              f"mesh force by more than {100 * refinement['tolerance']:g}%; "
+              f"{refinement['solved']} solved with the {refinement['checked']} middles "
+              f"checked, of at most {refinement['max_points']} (--max-points)")
     if result.folds_hz:
         print("folds at " + ", ".join(f"{f:.1f}" for f in result.folds_hz) + " Hz")
     if len(out["branches"]) > 1:

@@ -79,4 +79,5 @@ from .windowed import WindowedResponse as WindowedResponse
 from .windowed import WindowPlan as WindowPlan
 from .windowed import simulate_windowed as simulate_windowed
 from .windowed import simulate_windowed_points as simulate_windowed_points
+from .windowed import window_reports as window_reports
 from .windowed import window_plan as window_plan

@@ -49,7 +49,9 @@ The window loop is a ``lax.while_loop``: jit-able and vmappable over ``Omega``.
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Callable
 
 import diffrax as dfx
 import equinox as eqx
@@ -92,7 +94,10 @@ class Windowed(Integrator):
     - ``n_agree``: agreements in a row that end the run;
     - ``max_windows``: windows integrated at most (the history's length);
     - ``max_window_periods``: the longest window allowed, in base periods (a nearly
-      commensurate pair of frequencies asks for a longer one: refused).
+      commensurate pair of frequencies asks for a longer one: refused);
+    - ``report``: after each window, tell the listeners of :func:`window_reports` (a
+      host callback: such a program is compiled in each process, not kept in the
+      persistent compilation cache).
     """
 
     n_beats: int = eqx.field(static=True, default=100)
@@ -103,6 +108,7 @@ class Windowed(Integrator):
     n_agree: int = eqx.field(static=True, default=2)
     max_windows: int = eqx.field(static=True, default=32)
     max_window_periods: int = eqx.field(static=True, default=100_000)
+    report: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
         for name in ("n_beats", "min_periods", "samples_per_cycle", "n_agree",
@@ -119,6 +125,28 @@ class Windowed(Integrator):
         if self.max_windows < need:
             raise ValueError(f"Windowed.max_windows = {self.max_windows} leaves no room for "
                              f"transient_windows + n_agree + 1 = {need} windows.")
+
+
+_LISTENERS: list[Callable] = []
+
+
+@contextlib.contextmanager
+def window_reports(listener: Callable[[np.ndarray, np.ndarray, np.ndarray], None]):
+    """Within the block, ``listener(windows, steps, change)`` is called after each window
+    of every windowed integration whose settings have ``report``: the windows done, the
+    solver steps so far and the largest relative change of a mesh's mean or RMS force
+    from the window before (NaN for the first), each an array (one element per point of
+    a vmapped batch)."""
+    _LISTENERS.append(listener)
+    try:
+        yield listener
+    finally:
+        _LISTENERS.remove(listener)
+
+
+def _tell(windows, steps, change) -> None:
+    for listener in list(_LISTENERS):
+        listener(np.asarray(windows), np.asarray(steps), np.asarray(change))
 
 
 class WindowPlan(eqx.Module):
@@ -291,6 +319,9 @@ def _windows(problem: IntegrationProblem, plan: WindowPlan, F_static, omega, x0,
                                         RESULTS.not_stationary)))
         done = ~good | (streak >= settings.n_agree) | (k_new >= Wn)
         history = jax.tree.map(lambda h, a: h.at[k].set(a), state["history"], r)
+        steps = state["steps"] + sol.stats["num_accepted_steps"]
+        if settings.report:
+            jax.debug.callback(_tell, k_new, steps, jnp.where(k > 0, d, jnp.nan))
         return dict(
             k=jnp.where(good, k_new, k),
             z=jnp.where(good, z_new, state["z"]),
@@ -301,7 +332,7 @@ def _windows(problem: IntegrationProblem, plan: WindowPlan, F_static, omega, x0,
             streak=streak,
             done=done,
             code=code,
-            steps=state["steps"] + sol.stats["num_accepted_steps"],
+            steps=steps,
             rejected=state["rejected"] + sol.stats["num_rejected_steps"],
         )
 

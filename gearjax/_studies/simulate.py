@@ -288,7 +288,7 @@ def windowed_settings(case: GearCase, settings: wd.Windowed | None = None) -> di
                    f"{str(e).removeprefix('simulate_windowed: ')}") from None
     out = {"method": "windowed time integration", "solver": type(settings.solver).__name__}
     for f in dataclasses.fields(settings):
-        if f.name != "solver":
+        if f.name not in ("solver", "report"):
             out[f.name] = getattr(settings, f.name)
     out.update(window_periods=plan.periods, samples_per_period=plan.samples,
                slowest_beat=plan.slowest, torus=torus_fields(case))
@@ -337,7 +337,8 @@ def simulate_gear(
       solution in contact (:func:`~gearjax.contact_state`);
     - ``settings``: :class:`~gearjax.TimeDomain`; ``batch_size``: as
       :func:`~gearjax.simulate_points` (``"auto"``: 1 on a CPU, all on an accelerator);
-    - ``progress(message)``: called before and after the integration;
+    - ``progress(message)``: called before and after the integration, and for a
+      quasi-periodic gear as its windows are integrated (:class:`WindowProgress`);
     - ``command``: how the simulation was asked for, kept as the ``command`` attribute
       (default: empty);
     - ``windowed``: :class:`~gearjax.Windowed` settings of a quasi-periodic gear
@@ -389,6 +390,50 @@ def _warn_contact_loss(ds):
     return ds
 
 
+REPORT_EVERY_S = 10.0
+"""Seconds between two lines of a windowed integration's progress (the first window of
+each point is always reported)."""
+
+
+class WindowProgress:
+    """A :func:`~gearjax.window_reports` listener that turns the windows of a windowed
+    integration at ``f_hz`` (Hz, one point after the other or a vmapped batch) under
+    ``settings`` (:class:`~gearjax.Windowed`) into lines for ``progress(message)``: the
+    point, the window of at most ``max_windows``, the solver steps, how far the last two
+    windows differ against the agreement asked for, the time so far and a bound on the
+    time left (every point running all its windows at the pace so far); the first window
+    of each point, then at most one line every :data:`REPORT_EVERY_S` seconds."""
+
+    def __init__(self, progress: Callable[[str], None], f_hz, settings: wd.Windowed):
+        self.progress, self.f_hz, self.settings = progress, np.asarray(f_hz, float), settings
+        self.t0 = time.perf_counter()
+        self.shown, self.point, self.last, self.windows = -math.inf, 0, 0, 0
+
+    def __call__(self, windows, steps, change) -> None:
+        k = int(np.max(windows))
+        batch = np.size(windows) > 1
+        if k <= self.last or self.point == 0:
+            self.point += 1  # a point begins (one after the other)
+        self.last, self.windows = k, self.windows + 1
+        now = time.perf_counter()
+        if k != 1 and now - self.shown < REPORT_EVERY_S:
+            return
+        self.shown = now
+        s, P = self.settings, self.f_hz.size
+        elapsed = now - self.t0
+        left_windows = s.max_windows - k + (0 if batch else (P - self.point) * s.max_windows)
+        where = (f"{P} points at once" if batch else
+                 f"point {min(self.point, P)} of {P} "
+                 f"({self.f_hz[min(self.point, P) - 1]:.1f} Hz)")
+        d = float(np.nanmax(change)) if np.any(np.isfinite(change)) else math.nan
+        differ = ("" if not math.isfinite(d) else
+                  f", windows differ by {100 * d:.2g}% (agreement: within "
+                  f"{100 * s.tol:g}%, {s.n_agree} in a row)")
+        self.progress(f"simulate: {where}: window {k} of at most {s.max_windows}, "
+                      f"{int(np.max(steps))} solver steps{differ}; {elapsed:.0f} s, at most "
+                      f"about {elapsed / self.windows * left_windows:.0f} s left")
+
+
 def _simulate_torus(case: GearCase, f_hz, is_sweep: bool, x0, v0, settings, batch_size,
                     progress, command, t0):
     """:func:`simulate_gear` of a quasi-periodic gear (windowed integration)."""
@@ -400,8 +445,15 @@ def _simulate_torus(case: GearCase, f_hz, is_sweep: bool, x0, v0, settings, batc
                  f"{solver['window_periods']} base periods: the {case.G} frequency groups "
                  "are incommensurate, so the response is quasi-periodic (the first call "
                  "compiles)")
-    out = integrate_windowed(case, f_hz, is_sweep, x0, v0, settings, batch_size)
-    jax.block_until_ready(out)
+    if progress:
+        settings = dataclasses.replace(WINDOWED if settings is None else settings,
+                                       report=True)
+        with wd.window_reports(WindowProgress(progress, f_hz, settings)):
+            out = integrate_windowed(case, f_hz, is_sweep, x0, v0, settings, batch_size)
+            jax.block_until_ready(out)
+    else:
+        out = integrate_windowed(case, f_hz, is_sweep, x0, v0, settings, batch_size)
+        jax.block_until_ready(out)
     seconds = time.perf_counter() - t0
     if progress:
         progress(f"simulate: {len(f_hz)} points in {seconds:.1f} s")

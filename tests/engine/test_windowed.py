@@ -1,5 +1,6 @@
 """Windowed time integration: periodic and quasi-periodic excitation, result codes."""
 
+import dataclasses
 import time
 
 import jax.numpy as jnp
@@ -210,3 +211,28 @@ def test_settings_are_validated():
     with pytest.raises(RuntimeError, match="omega must be positive"):
         wd.simulate_windowed(clearance_oscillator(), 0.0, settings=wd.Windowed(
             tol=1e-8, transient_windows=1, n_agree=1, max_windows=3))
+
+
+def test_window_reports_tell_each_window_while_it_runs():
+    """With ``report``, a listener hears every window (windows done, steps so far, the
+    change from the window before) as the loop runs, also from a vmapped batch; without
+    it, or outside the block, nothing is told and the result is the same. The settings
+    of the test above (its program reused)."""
+    system = clearance_oscillator()
+    settings = wd.Windowed(tol=1e-8, transient_windows=1, n_agree=1, max_windows=3)
+    told = dataclasses.replace(settings, report=True)
+    heard = []
+    with gj.window_reports(lambda k, steps, change: heard.append((k, steps, change))):
+        out = wd.simulate_windowed(system, 1.0, settings=told)
+        quiet = wd.simulate_windowed(system, 1.0, settings=settings)
+    assert [int(k) for k, _, _ in heard] == [1, 2, 3] == list(range(1, int(out.windows) + 1))
+    steps = [int(s) for _, s, _ in heard]
+    assert steps == sorted(steps) and steps[-1] == int(out.stats["num_steps"])
+    assert np.isnan(heard[0][2]) and float(heard[-1][2]) == float(out.change[2])
+    np.testing.assert_array_equal(out.responses.rms_force, quiet.responses.rms_force)
+    heard.clear()
+    wd.simulate_windowed(system, 1.1, settings=told)
+    assert heard == []  # no listener: the callback tells no one
+    with gj.window_reports(lambda k, steps, change: heard.append(np.shape(k))):
+        wd.simulate_windowed_points(system, jnp.asarray([1.0, 1.1]), settings=told)
+    assert heard and all(shape in ((), (2,)) for shape in heard)

@@ -1,6 +1,7 @@
-"""A sweep's progress: a tqdm bar on a terminal, one final line otherwise and under
-``--json`` (the command line's decision: ``--json`` keeps stdout for the JSON object and
-stderr for one line each of progress and warnings)."""
+"""A sweep's progress: a tqdm bar on a terminal; otherwise and under ``--json`` a plain
+line every ``PLAIN_EVERY_S`` seconds at most and a final line (the command line's
+decision: ``--json`` keeps stdout for the JSON object and stderr for lines of progress
+and warnings)."""
 
 import io
 import sys
@@ -26,7 +27,7 @@ def feed(bar, frequencies, branches=None):
         time.sleep(0.11)  # past tqdm's refresh interval (0.1 s): every call shown
 
 
-def test_a_stream_that_is_no_terminal_gets_only_the_final_line():
+def test_a_stream_that_is_no_terminal_gets_only_the_final_line_within_the_interval():
     stream = io.StringIO()
     with gj.progress_bar(3200, 3400, stream) as bar:
         for n, f in enumerate([3200, 3250, 3240, 3300, 3400], start=1):
@@ -35,6 +36,19 @@ def test_a_stream_that_is_no_terminal_gets_only_the_final_line():
     assert len(lines) == 1 and "\r" not in stream.getvalue()
     assert lines[0].startswith("sweep: 5 points, 2 branches, up to 3400.0 Hz, ")
     assert lines[0].endswith(" s")
+
+
+def test_a_stream_that_is_no_terminal_gets_a_line_each_interval(monkeypatch):
+    monkeypatch.setattr(_progress, "PLAIN_EVERY_S", 0.0)
+    stream = io.StringIO()
+    with gj.progress_bar(3200, 3400, stream) as bar:
+        for n, f in enumerate([3200, 3250, 3240], start=1):
+            bar(n, f, 1)
+    lines = stream.getvalue().splitlines()
+    assert [l.split(", up to ")[0] for l in lines] == [
+        "sweep: 1 points, 1 branch", "sweep: 2 points, 1 branch", "sweep: 3 points, 1 branch",
+        "sweep: 3 points, 1 branch"]  # the last one the final line
+    assert "up to 3250.0 Hz" in lines[-1]  # the furthest reached, not the last reported
 
 
 def test_a_terminal_gets_a_bar_across_the_band_with_frequency_points_and_branches():
@@ -101,8 +115,11 @@ def test_printer_off_a_terminal_writes_a_line_per_25_points_also_where_it_jumps(
 @pytest.mark.parametrize("terminal", [False, True])
 def test_sweep_command_writes_only_the_final_progress_line_unless_on_a_terminal(
         capsys, monkeypatch, paper_toml_h1, json_flag, terminal):
-    """Off a terminal, and under --json also on one, stderr gets one progress line, after
-    the line announcing the truncation check (the step before the first point)."""
+    """Off a terminal, and under --json also on one, stderr gets the line announcing the
+    truncation check (the step before the first point) and one final progress line (the
+    run is shorter than ``PLAIN_EVERY_S``; the flank is straight: no refinement round,
+    whose lines tests/studies/test_refine_bounds.py checks)."""
+    monkeypatch.setattr(_progress, "PLAIN_EVERY_S", 3600.0)
     stream = Terminal() if terminal else None
     if stream is not None:
         monkeypatch.setattr(sys, "stderr", stream)
@@ -111,6 +128,7 @@ def test_sweep_command_writes_only_the_final_progress_line_unless_on_a_terminal(
     err = stream.getvalue() if stream is not None else capsys.readouterr().err
     check = "sweep: truncation check, segment 1 of 1 at 5000.0 Hz: K = 16 against 32"
     lines = [l for l in err.splitlines() if not l.startswith("warning: ")]
+    assert not any(l.startswith("sweep: refinement round ") for l in lines)  # a straight flank
     assert code == 0 and check in err
     if terminal and not json_flag:
         assert "\rsweep   0%|" in err and "5000.0 Hz, 0 points" in err  # the bar drawn

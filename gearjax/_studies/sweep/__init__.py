@@ -39,6 +39,7 @@ from .progress import SweepProgress as SweepProgress
 from .progress import progress_bar as progress_bar
 from .progress import progress_printer as progress_printer
 from .record import SweepLog as SweepLog
+from .refine import RefinementWarning as RefinementWarning
 from .starts import backlash_start as backlash_start
 from .starts import newton as newton
 from .starts import resize_harmonics as resize_harmonics

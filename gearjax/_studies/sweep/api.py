@@ -27,7 +27,7 @@ from .default_band import resolve_band
 from .dataset import point_data, sweep_result_dataset
 from .post import PostStream
 from .progress import with_branches
-from .refine import LINEAR_TOLERANCE
+from .refine import LINEAR_TOLERANCE, MAX_ROUNDS, RefinementWarning, refinement_warning
 from .record import SweepLog, run_fields
 from .summary import SweepResult
 
@@ -63,7 +63,9 @@ def sweep(
     ``linear``: drop the backlash; ``harmonics``: fixed K (default: frequency-dependent,
     :func:`gearjax._studies.harmonics.harmonics_rule`); ``eta``: sub-harmonic index;
     ``max_step_hz``: largest frequency step (default 1/100 of the band); ``points``:
-    grid size of a linear sweep; ``max_points``: cap on a continuation; ``max_detour``:
+    points of a linear sweep's even grid (refined where straight lines between them
+    would misstate the curve); ``max_points``: cap on a continuation's points, or on
+    the points a linear sweep solves (grid, refinement middles); ``max_detour``:
     points a branch may go without passing the furthest frequency it reached before the
     sweep restarts beyond it (:mod:`~gearjax._studies.sweep.walk`); ``smoothing``:
     corner rounding of the backlash relative to it (0: exact piecewise-linear, see
@@ -72,7 +74,8 @@ def sweep(
     frequency reached (Hz) and the branches begun so far (restarts plus one), the third
     argument only where ``progress`` takes one (:func:`.progress.with_branches`);
     ``say(line)``: called with a line of text before each step that runs before the
-    first point (each truncation check of a segment's harmonics);
+    first point (each truncation check of a segment's harmonics) and before each round
+    of a linear sweep's refinement;
     ``command``: how the sweep was asked for, kept
     as the dataset's ``command`` attribute (default: empty).
 
@@ -117,7 +120,9 @@ def sweep(
     an unknown stage, backlash on an unloaded stage without ``drag_torque``, or a
     journal that cannot be resumed.
 
-    **Warns:** :class:`~gearjax._studies.validity.ContactLossWarning` where a linear
+    **Warns:** :class:`~gearjax._studies.sweep.refine.RefinementWarning` where a linear
+    sweep's refinement stopped (at ``max_points`` or after its most halvings) with lines
+    still suspect; :class:`~gearjax._studies.validity.ContactLossWarning` where a linear
     sweep's alternating mesh force exceeds the static one (the teeth would leave
     contact), naming the first frequency (:func:`~gearjax._studies.validity.contact_loss`).
     """
@@ -128,7 +133,7 @@ def sweep(
         say(f"band {from_hz:.1f}-{to_hz:.1f} Hz, chosen {chosen}")
     check_arguments(from_hz, to_hz, eta=eta, smoothing=smoothing, harmonics=harmonics,
                     max_step_hz=max_step_hz, points=points, max_points=max_points,
-                    seeds=seeds)
+                    seeds=seeds, linear=linear)
     complete = bool(complete) and not linear
     case = gear_case(train, gear, stage, linear, torus=True)
     system = case.system
@@ -180,12 +185,15 @@ def sweep(
     walk = _walk.Walk(segments=list(segments))
     post = PostStream(F_static)
     pieces, branches = _run_walk(ctx, walk, log, post, linear=linear, points=points,
-                                 progress=with_branches(progress), F_static=F_static,
+                                 progress=with_branches(progress), say=say,
+                                 F_static=F_static,
                                  complete=complete, seeds=seeds, start=start,
                                  phases=phases)
     if linear:
-        solver["refinement"] = {"tolerance": LINEAR_TOLERANCE, "checked": walk.checked,
-                                "added": walk.added}
+        solver["refinement"] = _refinement(walk, max_points)
+        line = refinement_warning(solver["refinement"])
+        if line is not None:
+            warnings.warn(RefinementWarning(line), stacklevel=2)
     if complete:
         solver["completion"] = {"seeds": int(seeds), "jump_multiplier":
                                 _seeds.JUMP_MULTIPLIER, "max_branches":
@@ -209,6 +217,22 @@ def sweep(
                        phase_seconds=dict(phases))
 
 
+def _refinement(walk, max_points: int) -> dict:
+    """A linear sweep's ``solver.refinement`` (:mod:`~gearjax._studies.sweep.refine`):
+    ``tolerance``, ``grid`` (points of the even grids), ``added``, ``checked``, ``solved``
+    (grid, segment ends and middles), ``max_points`` (the cap on ``solved``),
+    ``unresolved`` (intervals still suspect where the refinement stopped) and
+    ``stopped`` (``"max_points"``, ``"max_rounds"``, or ``None`` where every line was
+    judged within the tolerance)."""
+    stops = walk.refine_stops
+    return {"tolerance": LINEAR_TOLERANCE, "grid": walk.done - walk.added,
+            "added": walk.added, "checked": walk.checked, "solved": walk.solved,
+            "max_points": int(max_points), "max_rounds": MAX_ROUNDS,
+            "unresolved": walk.unresolved,
+            "stopped": ("max_points" if "max_points" in stops else stops[0]) if stops
+            else None}
+
+
 class Phases(dict):
     """Wall seconds per phase of a sweep, in the order run (``SweepResult.phase_seconds``):
     :meth:`end` closes the phase running since the last call (or since creation)."""
@@ -223,7 +247,7 @@ class Phases(dict):
         self._since = now
 
 
-def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress,
+def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress, say=None,
               F_static, complete: bool = False, seeds: int = 0, start=None,
               phases: Phases | None = None):
     """Walk every segment (a linear grid, or the continuations with the last segment
@@ -242,7 +266,7 @@ def _run_walk(ctx, walk, log, post, *, linear: bool, points: int, progress,
     spec = None
     try:
         if linear:
-            _walk.linear_segments(ctx, walk, log, points, progress, F_static)
+            _walk.linear_segments(ctx, walk, log, points, progress, F_static, say=say)
         while not linear and len(walk.problems) < len(walk.segments):
             entered, spec = _speculation.speculate(ctx, walk, log, post, spec, last)
             if not walk.problems and entered is None:

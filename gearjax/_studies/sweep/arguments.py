@@ -9,12 +9,13 @@ from ..._errors import bad_argument
 
 
 def check_arguments(from_hz, to_hz, *, eta, smoothing, harmonics, max_step_hz, points,
-                    max_points, seeds=0) -> None:
+                    max_points, seeds=0, linear=False) -> None:
     """Refuse arguments of :func:`gearjax._studies.sweep.sweep` that cannot describe a
     sweep.
 
     **Raises:** ``ArgumentError`` naming the argument (``from_hz``, ``to_hz``, ``eta``,
-    ``smoothing``, ``harmonics``, ``max_step_hz``, ``points``, ``max_points``, ``seeds``)."""
+    ``smoothing``, ``harmonics``, ``max_step_hz``, ``points``, ``max_points``, ``seeds``); ``linear``: a linear sweep, whose grid of
+    ``points`` must fit in ``max_points``."""
     def integer(value) -> bool:
         return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
@@ -41,6 +42,10 @@ def check_arguments(from_hz, to_hz, *, eta, smoothing, harmonics, max_step_hz, p
         raise bad_argument("points", points, "must be an integer >= 2")
     if not integer(max_points) or max_points < 2:
         raise bad_argument("max_points", max_points, "must be an integer >= 2")
+    if linear and points > max_points:
+        raise bad_argument("points", points, f"more than `max_points` = {max_points}, the "
+                           "most points a linear sweep solves (its grid and the middles "
+                           "that refine it)")
     if not integer(seeds) or seeds < 0 or seeds == 1:
         raise bad_argument("seeds", seeds, "must be 0 (no integration seeds) or an integer "
                            ">= 2 (frequencies of the up and down integration sweeps)")

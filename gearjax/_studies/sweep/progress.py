@@ -20,6 +20,11 @@ BAR_FORMAT = "sweep {percentage:3.0f}%|{bar}| {desc} [{elapsed}<{remaining}]"
 branches, elapsed time and tqdm's estimate of the time left."""
 
 
+PLAIN_EVERY_S = 10.0
+"""Seconds between two progress lines where no bar is drawn (off a terminal, or under
+the command line's ``--json``)."""
+
+
 class SweepProgress:
     """A sweep's progress across the band ``from_hz`` to ``to_hz`` (Hz, either direction)
     on ``stream``.
@@ -28,7 +33,8 @@ class SweepProgress:
     tqdm bar on ``stream`` advances with the furthest frequency reached towards
     ``to_hz`` (a continuation turning back at a fold does not move it back; time left:
     tqdm's estimate from the rate across the band) and shows the frequency, the points
-    and the branches. :meth:`close` removes the bar and writes one final line (points,
+    and the branches; where not ``live``, a plain line (:meth:`final_line`'s words so
+    far) every :data:`PLAIN_EVERY_S` seconds at most. :meth:`close` removes the bar and writes one final line (points,
     branches, furthest frequency, elapsed seconds), also where not ``live``; nothing is
     written when no point was reported (a sweep refused before its first point). A
     context manager: leaving it closes.
@@ -38,7 +44,7 @@ class SweepProgress:
         self.from_hz, self.to_hz, self.stream = float(from_hz), float(to_hz), stream
         self.span = abs(self.to_hz - self.from_hz)
         self.points, self.branches, self.reached_hz = 0, 1, self.from_hz
-        self.t0 = time.perf_counter()
+        self.t0 = self.shown = time.perf_counter()
         self.closed = False
         self.bar = (tqdm(total=self.span, file=stream, bar_format=BAR_FORMAT, leave=False,
                          dynamic_ncols=True, desc=self._status(self.from_hz))
@@ -60,6 +66,10 @@ class SweepProgress:
         if self.bar is not None:
             self.bar.set_description_str(self._status(float(f_hz)), refresh=False)
             self.bar.update(self._covered(self.reached_hz) - self.bar.n)
+        elif time.perf_counter() - self.shown >= PLAIN_EVERY_S:
+            self.shown = time.perf_counter()
+            self.stream.write(self.final_line() + "\n")
+            self.stream.flush()
 
     def note(self, line: str) -> None:
         """Write ``line`` on the stream (above the bar where it is live), for the steps
@@ -71,7 +81,8 @@ class SweepProgress:
             self.stream.flush()
 
     def final_line(self) -> str:
-        """``sweep: N points, B branches, up to F Hz, T s``."""
+        """``sweep: N points, B branches, up to F Hz, T s`` (the points and frequency
+        reached so far while the sweep runs)."""
         return (f"sweep: {self.points} points, {self.branches} "
                 f"branch{'es' if self.branches != 1 else ''}, up to {self.reached_hz:.1f} Hz, "
                 f"{time.perf_counter() - self.t0:.1f} s")

@@ -3,8 +3,11 @@
 
 Records: ``{"type": "point", "segment", "i", "K", "y", "lam", "ty", "tlam", "h", "age", "own",
 "steps", "fold", "fold_lam"}`` per continuation point, ``{"type": "end", "segment",
-"stop"}`` when a segment ends, ``{"type": "batch", "segment", "K", "omega", "X",
-"result"}`` per linear segment. The journal header's ``run`` fields are
+"stop"}`` when a segment ends; per linear segment ``{"type": "solved", "segment", "K",
+"omega", "X", "result", "converged"}`` per chunk of points solved and ``{"type":
+"batch", "segment", "K", "omega", "X", "result", "solved", "checked", "added",
+"unresolved", "stopped"}`` with its points once refined
+(:func:`~gearjax._studies.sweep.walk.linear_segments`). The journal header's ``run`` fields are
 :func:`run_fields`.
 """
 
@@ -33,10 +36,10 @@ def run_fields(train_toml: str, *, gear: str, stage: str, from_hz, to_hz, linear
            "--harmonics": None if harmonics is None else int(harmonics), "--eta": int(eta),
            "--max-step": None if max_step_hz is None else float(max_step_hz),
            "--smoothing": float(smoothing)}
+    run["--max-points"] = int(max_points)
     if linear:
         run["--points"] = int(points)
     else:
-        run["--max-points"] = int(max_points)
         if not complete:
             run["--no-complete"] = True
         if complete and seeds:
@@ -51,6 +54,7 @@ class SweepLog:
     def __init__(self, records: list[dict], writer=None):
         self._writer = writer
         self._points: dict[int, list[dict]] = {}
+        self._solved: dict[int, list[dict]] = {}
         self._other: dict[tuple[str, int], dict] = {}
         for n, rec in enumerate(records):
             self._index(rec, writer.path if writer else None, n)
@@ -94,6 +98,8 @@ class SweepLog:
                            f"out of order (expected point {len(pts)}): the journal was "
                            "changed after it was written; delete it to start afresh")
             pts.append(rec)
+        elif kind == "solved":
+            self._solved.setdefault(j, []).append(rec)
         elif kind in ("end", "batch"):
             self._other[(kind, j)] = rec
         else:
@@ -117,11 +123,23 @@ class SweepLog:
         """Linear segment ``j``'s batch record, ``None`` before it is solved."""
         return self._other.get(("batch", j))
 
+    def solved(self, j: int) -> list[dict]:
+        """Linear segment ``j``'s records of points solved, in order."""
+        return self._solved.get(j, [])
+
+    def refused(self, j: int, rule: str):
+        """The ``TrainError`` refusing to resume segment ``j`` of this journal for
+        ``rule`` (to raise)."""
+        where = self._writer.path if self._writer else "journal"
+        return fail(str(where), f"segment {j} records of points solved",
+                    len(self.solved(j)), f"{rule}: delete the journal to start afresh")
+
     def require_K(self, j: int, K: int) -> None:
         """Refuse a journal whose segment ``j`` was solved with another K than this run's
         ``K`` for it (e.g. a truncation check that decided otherwise on another machine),
         before any of its records is replayed."""
-        recs = self.points(j)[:1] + [r for r in [self.batch(j)] if r is not None]
+        recs = (self.points(j)[:1] + self.solved(j)[:1]
+                + [r for r in [self.batch(j)] if r is not None])
         for rec in recs:
             if as_orders(rec["K"]) != as_orders(K):
                 where = self._writer.path if self._writer else "journal"

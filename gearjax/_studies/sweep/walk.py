@@ -30,7 +30,7 @@ from ..._engine import continuation as _continuation
 from ..._engine.kept import kept_program
 from ..._engine.results import RESULTS, result_from_word, result_word
 from . import starts as _starts
-from .refine import refine_linear
+from .refine import ReplayError, refine_linear
 
 MAX_DETOUR = 150
 """Points a continuation may go without passing its furthest frequency before the sweep
@@ -67,7 +67,9 @@ class Walk:
     point so far (a fresh branch's first guess); ``failed``: fresh starts that failed in
     a row (the restart gap doubles with each); ``done``: points kept so far (a continued
     segment's first point stands in for the previous segment's last, past the boundary,
-    which the output leaves out)."""
+    which the output leaves out). A linear sweep's refinement (:func:`linear_segments`)
+    counts ``solved``, ``checked``, ``added`` and ``unresolved``, and ``refine_stops``
+    lists why a segment's refinement stopped with intervals unresolved."""
 
     segments: list
     problems: list = dataclasses.field(default_factory=list)
@@ -79,8 +81,11 @@ class Walk:
     furthest: tuple | None = None
     failed: int = 0
     done: int = 0
+    solved: int = 0
     checked: int = 0
     added: int = 0
+    unresolved: int = 0
+    refine_stops: list = dataclasses.field(default_factory=list)
 
     def handover(self, j: int) -> tuple:
         """``(previous, guess)`` for :func:`~gearjax._studies.sweep.starts.enter_segment`
@@ -92,12 +97,19 @@ class Cancelled(Exception):
     """A continuation was called off (a speculation, from its ``cancel`` event)."""
 
 
-def linear_segments(ctx, walk, log, points, progress, F_static) -> None:
+def linear_segments(ctx, walk, log, points, progress, F_static, say=None) -> None:
     """A linear sweep: each segment's grid of independent points (``points`` evenly over
     the whole band to start with), refined where straight lines between them would
-    misstate the curve (:func:`~gearjax._studies.sweep.refine.refine_linear`), one
-    journal record per segment; ``walk.checked`` and ``walk.added`` count the middles
-    solved and kept."""
+    misstate the curve (:func:`~gearjax._studies.sweep.refine.refine_linear`), with at
+    most ``ctx.max_points`` points solved over the band (each segment's grid always);
+    every chunk of points solved is journaled as solved (a ``solved`` record), the
+    segment's points as one ``batch`` record when it is done. ``walk`` counts the points
+    ``solved``, the middles ``checked`` and ``added``, and the ``unresolved`` intervals
+    with the reason the refinement stopped (``refine_stops``); ``progress`` is told the
+    points kept as they are solved, ``say`` each refinement round.
+
+    **Raises:** ``TrainError`` naming the journal where its solved points are not those
+    this run's refinement asks for."""
     span = ctx.to_hz - ctx.from_hz
     for j, (f_a, f_b, K) in enumerate(walk.segments):
         problem = ctx.problem(K)
@@ -107,15 +119,34 @@ def linear_segments(ctx, walk, log, points, progress, F_static) -> None:
             n = max(2, round(points * abs(f_b - f_a) / abs(span)))
             last = f_b == walk.segments[-1][1]
             freqs = np.linspace(f_a, f_b, n, endpoint=last)
-            refined = refine_linear(problem, [ctx.omega(f) for f in freqs], F_static,
-                                    None if last else ctx.omega(f_b),
-                                    max_points=max(ctx.max_points - walk.done, n))
+            done = walk.done
+
+            def report(solved, kept, done=done, freqs=freqs):
+                if progress:
+                    progress(done + kept, float(freqs[min(kept, freqs.size) - 1]), 1)
+
+            try:
+                refined = refine_linear(
+                    problem, [ctx.omega(f) for f in freqs], F_static,
+                    None if last else ctx.omega(f_b),
+                    max_points=max(ctx.max_points - walk.solved, n + (not last)),
+                    replay=log.solved(j), report=report, say=say,
+                    record=lambda rec, j=j, K=K: log.add({"type": "solved", "segment": j,
+                                                          "K": K, **rec}))
+            except ReplayError as e:
+                raise log.refused(j, str(e)) from None
             log.add({"type": "batch", "segment": j, "K": K, "omega": refined.omega,
                      "X": np.asarray(refined.X, float), "result": refined.result,
-                     "checked": refined.checked, "added": refined.added})
+                     "solved": refined.solved, "checked": refined.checked,
+                     "added": refined.added, "unresolved": refined.unresolved,
+                     "stopped": refined.stopped})
         batch = log.batch(j)
-        walk.checked += int(batch.get("checked", 0))
-        walk.added += int(batch.get("added", 0))
+        walk.solved += int(batch["solved"])
+        walk.checked += int(batch["checked"])
+        walk.added += int(batch["added"])
+        walk.unresolved += int(batch["unresolved"])
+        if batch["stopped"] is not None:
+            walk.refine_stops.append(batch["stopped"])
         walk.done += len(batch["omega"])
         if progress:
             progress(walk.done, float(batch["omega"][-1]) * ctx.mu_ref / (2 * math.pi), 1)
