@@ -435,9 +435,9 @@ def _parser() -> argparse.ArgumentParser:
     c = command("optimize", _optimize_cmd,
                 "planet positions, sun-ring and stage phases that minimise the peak RMS "
                 "mesh force over a band")
-    c.add_argument("--band", type=float, nargs=2, default=[2000.0, 15000.0],
-                   metavar=("LO", "HI"),
-                   help="reference-stage mesh frequencies (Hz), default 2000 15000")
+    c.add_argument("--band", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+                   help="reference-stage mesh frequencies (Hz); default: a band chosen "
+                        "from the gear's modes and excitation orders (said on stderr)")
     c.add_argument("--vary", nargs="+", metavar="PATH",
                    help="STAGE.planet_angles_deg, STAGE.sun_ring_phase_deg, "
                         "STAGE.stage_phase_deg (default: all of the turning stages)")
@@ -1009,8 +1009,9 @@ def _verify_cmd(args, train, notes) -> int:
         kind = "linear" if args.linear else "backlash"
         with _atomic(args.plot) as fig:
             plot_verify(result.hb, result.ni, fig, curve=curve,
-                        title=f"{train.name}: gear {g.name}, {kind}: harmonic balance (line) "
-                              "and time integration (markers)")
+                        title=f"{train.name}: gear {g.name}, {kind}: harmonic balance "
+                              f"({'line' if curve is not None else '+'}) and time "
+                              "integration (circles)")
     if args.out:
         with _atomic(args.out) as tmp:
             save_verify(result, tmp)
@@ -1096,7 +1097,7 @@ def _sensitivity_cmd(args, train, notes) -> int:
         raise fail("command line", "--at", args.at, "must be a positive mesh frequency in Hz")
     result = sensitivity(train, args.gear, args.at, response=args.response, mesh=args.mesh,
                          paths=args.vary, stage=args.stage, linear=args.linear,
-                         harmonics=args.harmonics)
+                         harmonics=args.harmonics, progress=_stderr)
     out = sensitivity_json(result)
     out["warnings"] = notes
     code = EXIT_OK if result.ok else EXIT_NOT_CONVERGED
@@ -1142,7 +1143,7 @@ def _optimize_cmd(args, train, notes) -> int:
         relax_iterations=args.relax_iterations,
         passes=args.passes)
     rechecking = args.recheck and args.nonlinear > 0
-    recheck_band = tuple(args.recheck_band or args.band)
+    recheck_band = tuple(args.recheck_band) if args.recheck_band is not None else None
     if rechecking:  # refused before the optimisation, in the re-check flags' words
         if args.recheck_band is not None:  # (the default, --band, the optimiser checks)
             try:
@@ -1153,7 +1154,8 @@ def _optimize_cmd(args, train, notes) -> int:
             raise bad_argument("recheck_harmonics", args.recheck_harmonics,
                                "must be an integer >= 1")
     g = train.gear(args.gear)
-    result = optimize(train, g.name, tuple(args.band), args.vary, stage=args.stage,
+    result = optimize(train, g.name, None if args.band is None else tuple(args.band),
+                      args.vary, stage=args.stage,
                       settings=settings, progress=_stderr)
     check = None
     if rechecking:

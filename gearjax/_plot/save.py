@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import pathlib
+import textwrap
 import tomllib
 from collections.abc import Callable
 
@@ -189,16 +190,39 @@ def frequency_unit(ds) -> tuple[float, str]:
     return (1e3, "kHz") if top >= 1e3 else (1.0, "Hz")
 
 
+TITLE_WIDTH = 100
+"""Characters of a figure title's line (a longer title is wrapped, not clipped)."""
+
+
+def rpm_per_unit(ds, scale: float) -> float | None:
+    """Input speed (rpm) per unit of the frequency axis (``scale`` Hz, :func:`frequency_unit`)
+    of the points of ``ds``: mesh frequency and input speed are proportional for one gear;
+    ``None`` where ``ds`` has no ``input_rpm`` or no point gives a finite positive ratio."""
+    if "input_rpm" not in ds:
+        return None
+    f = np.asarray(ds["mesh_frequency_hz"], dtype=float).reshape(-1)
+    n = np.asarray(ds["input_rpm"], dtype=float).reshape(-1)
+    ok = np.isfinite(f) & np.isfinite(n) & (f > 0) & (n > 0)
+    return float(np.median(n[ok] / f[ok]) * scale) if np.any(ok) else None
+
+
 def _finish(fig, axes, ds, path, title: str, styles=()) -> None:
-    """Frequency labels, title, and one legend below the panels (one entry per planet
-    number of any stage, in its colour, then ``styles``: proxy artists of the line and
-    marker styles); save to ``path`` and close."""
+    """Frequency labels (and the input speed, rpm, on the top panels where ``ds`` has
+    it), the title wrapped at :data:`TITLE_WIDTH`, and one legend below the panels (one
+    entry per planet number of any stage, in its colour, then ``styles``: proxy artists
+    of the line and marker styles); save to ``path`` and close."""
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
+    scale, unit = frequency_unit(ds)
     for ax in axes[-1]:
-        ax.set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency "
-                      f"({frequency_unit(ds)[1]})")
+        ax.set_xlabel(f"stage {ds.attrs.get('reference_stage', '')} mesh frequency ({unit})")
+    rpm = rpm_per_unit(ds, scale)
+    if rpm is not None:  # the drivetrain engineer's axis: input speed, on the top panels
+        for ax in axes[0]:
+            top = ax.secondary_xaxis("top", functions=(lambda x: x * rpm, lambda n: n / rpm))
+            top.set_xlabel("input speed (rpm)", fontsize=8)
+            top.tick_params(labelsize=7)
     for ax in axes.ravel():
         _not_a_trend(ax)
     planets = sorted({int(p) for p in np.asarray(ds["planet"]).tolist()})
@@ -208,7 +232,8 @@ def _finish(fig, axes, ds, path, title: str, styles=()) -> None:
         fig.legend(handles=handles, loc="outside lower center",
                    ncol=len(handles) if len(handles) <= 5 else -(-len(handles) // 2),
                    fontsize=7, frameon=False)
-    fig.suptitle(title, fontsize=10)
+    fig.suptitle("\n".join(line for part in title.split("\n")
+                            for line in textwrap.wrap(part, TITLE_WIDTH) or [""]), fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
@@ -219,11 +244,13 @@ def plot_verify(hb, ni, path: str, curve=None, title: str = "", what: str = "rms
 
     ``hb``, ``ni``: results Datasets at the same points (``VerifyResult.hb``, ``.ni``);
     ``curve``: an optional sweep Dataset drawn as the harmonic-balance line (otherwise
-    the line joins the ``hb`` points in frequency order); ``what`` as
+    the ``hb`` points are drawn as markers, not joined); ``what`` as
     :func:`plot_sweep`. See :func:`plot_points`.
     """
     plot_points(ni, path, line=curve if curve is not None else hb, what=what,
-                title=title or "harmonic balance (lines) and time integration (markers)")
+                title=title or ("harmonic balance (lines) and time integration (circles)"
+                                if curve is not None else
+                                "harmonic balance (+) and time integration (circles)"))
 
 
 def plot_points(ds, path: str, line=None, title: str = "", what: str = "rms"):
@@ -235,12 +262,13 @@ def plot_points(ds, path: str, line=None, title: str = "", what: str = "rms"):
     points that did not converge (e.g. an integration that did not settle to the base
     period). Meshes are matched by name. ``line``: a sweep (a ``branch`` variable) is
     drawn per branch in the order swept, solid stable and dashed unstable; other points
-    are joined in frequency order. The legend is below the panels.
+    as markers, not joined. The legend is below the panels.
     """
     from matplotlib.lines import Line2D
 
     var, ylabel = WHAT[what]
-    f_pts = np.asarray(ds["mesh_frequency_hz"]) / frequency_unit(ds)[0]
+    scale = frequency_unit(ds if line is None else line)[0]
+    f_pts = np.asarray(ds["mesh_frequency_hz"]) / scale
     settled = np.asarray(ds["converged"])
     names = np.asarray(ds["mesh"]).tolist()
     fig, axes, panels = _mesh_panels(ds, ylabel)
@@ -250,15 +278,19 @@ def plot_points(ds, path: str, line=None, title: str = "", what: str = "rms"):
             label = f"planet {int(ds['planet'][j])}" if first else None
             if line is not None:
                 k = np.asarray(line["mesh"]).tolist().index(names[j])
-                _line_of(ax, line, np.asarray(line[var])[:, k], color, label)
+                _line_of(ax, line, np.asarray(line[var])[:, k], color, label, scale)
                 label = None
             y = np.asarray(ds[var])[:, j]
             ax.plot(f_pts[settled], y[settled], "o", mfc="none", ms=6, color=color, label=label)
             ax.plot(f_pts[~settled], y[~settled], "x", ms=6, color=color)
-    unstable = (line is not None and "branch" in line and "stable" in line
+    swept = line is not None and "branch" in line
+    unstable = (swept and "stable" in line
                 and bool(np.any(np.asarray(line["stable"]) == 0)))
     styles = ([Line2D([], [], color="0.3", lw=1.0, label="harmonic balance"
-                      + (", stable" if unstable else ""))] if line is not None else [])
+                      + (", stable" if unstable else ""))] if swept else [])
+    if line is not None and not swept:
+        styles.append(Line2D([], [], ls="", marker=POINT_MARKER, color="0.3",
+                             label="harmonic balance"))
     if unstable:
         styles.append(Line2D([], [], ls="--", color="0.3", lw=1.0,
                              label="harmonic balance, unstable"))
@@ -269,17 +301,22 @@ def plot_points(ds, path: str, line=None, title: str = "", what: str = "rms"):
             title or f"{ylabel} (open circles converged, crosses not)", styles)
 
 
-def _line_of(ax, line, y, color, label) -> None:
-    """The harmonic-balance line of :func:`plot_points`: a sweep (a ``branch``
-    variable) in the order swept, per branch and by stability as :func:`plot_sweep`;
-    other points joined in frequency order."""
-    f = np.asarray(line["mesh_frequency_hz"]) / 1e3
+POINT_MARKER = "+"
+"""The marker of harmonic-balance points that are not a sweep (no line is drawn between
+solutions that are not neighbours on a branch)."""
+
+
+def _line_of(ax, line, y, color, label, scale: float = 1e3) -> None:
+    """The harmonic-balance response of :func:`plot_points` against frequency in units of
+    ``scale`` Hz: a sweep (a ``branch`` variable) as lines in the order swept, per branch
+    and by stability as :func:`plot_sweep`; other points as markers
+    (:data:`POINT_MARKER`), not joined: the response between them is not known."""
+    f = np.asarray(line["mesh_frequency_hz"]) / scale
     if "branch" in line:
         stable = np.asarray(line["stable"]) if "stable" in line else np.full(f.shape, -1)
         _branch_lines(ax, f, y, stable, np.asarray(line["branch"]), color, label)
     else:
-        order = np.argsort(f)
-        ax.plot(f[order], y[order], "-", lw=1.0, color=color, label=label)
+        ax.plot(f, y, POINT_MARKER, ms=8, color=color, label=label)
 
 
 # ------------------------------------------------------------------ saved results
@@ -361,7 +398,7 @@ def _redraw_simulate(path, ds, fig, what):
 def _redraw_verify(path, ds, fig, what):
     _, hb, ni = load_verify(path)
     plot_verify(hb, ni, fig, what=what, title=_title(hb, what, "verification")
-                + "\nlines: harmonic balance, markers: time integration")
+                + "\n+: harmonic balance, circles: time integration")
 
 
 def plot_optimize(ds, path: str, title: str = ""):

@@ -157,3 +157,66 @@ def test_a_sweep_stopped_by_its_point_budget_is_marked_where_it_stopped(tmp_path
     marks = [line for ax in figures[0].axes for line in ax.get_lines()
              if line.get_linestyle() == "-." and np.allclose(line.get_xdata(), last)]
     assert len(marks) == len([ax for ax in figures[0].axes if ax.get_lines()])
+
+
+def wind_points(f, rpm_per_hz=None, converged=True):
+    """Results at the mesh frequencies ``f`` (Hz) of a one-stage, three-planet gear, with
+    ``input_rpm`` proportional to them where ``rpm_per_hz`` is given."""
+    meshes = [f"1.sp{i}" for i in (1, 2, 3)] + [f"1.rp{i}" for i in (1, 2, 3)]
+    f = np.asarray(f, float)
+    data = {"mesh_frequency_hz": ("point", f),
+            "converged": ("point", np.full(f.size, converged)),
+            "rms_force": (("point", "mesh"), np.outer(1000 + f, np.arange(1, 7)))}
+    if rpm_per_hz is not None:
+        data["input_rpm"] = ("point", rpm_per_hz * f)
+    return xr.Dataset(data, coords={
+        "mesh": meshes, "stage": ("mesh", ["1"] * 6),
+        "side": ("mesh", ["sun"] * 3 + ["ring"] * 3), "planet": ("mesh", [1, 2, 3] * 2)},
+        attrs={"reference_stage": "1"})
+
+
+def _kept_figures(monkeypatch):
+    figures = []
+    monkeypatch.setattr("matplotlib.figure.Figure.savefig",
+                        lambda fig, *a, **k: figures.append(fig))
+    return figures
+
+
+def test_sweeps_carry_an_input_speed_axis_in_rpm(tmp_path, monkeypatch):
+    """Mesh frequency and input speed are proportional for a gear: the top panels get a
+    second axis in rpm (a run-up is read in input speed), where the results give it."""
+    ds = wind_points(np.linspace(30.0, 45.0, 6), rpm_per_hz=0.4)
+    ds["stable"] = ("point", np.ones(6, np.int8))
+    ds["branch"] = ("point", np.zeros(6, int))
+    figures = _kept_figures(monkeypatch)
+    _save.plot_sweep(ds, str(tmp_path / "sweep.png"))
+    _save.plot_sweep(ds.drop_vars("input_rpm"), str(tmp_path / "plain.png"))
+    with_rpm, plain = figures
+    top = [child for ax in with_rpm.axes for child in ax.child_axes]
+    assert len(top) == 2 and all(t.get_xlabel() == "input speed (rpm)" for t in top)
+    lo, hi = with_rpm.axes[0].get_xlim()
+    forward = top[0]._functions[0]
+    assert forward(np.asarray([lo, hi])) == pytest.approx([0.4 * lo, 0.4 * hi])
+    assert not [child for ax in plain.axes for child in ax.child_axes]
+
+
+def test_verify_points_without_a_curve_are_markers_where_solutions_are(tmp_path,
+                                                                       monkeypatch):
+    """Without a sweep to draw, the harmonic-balance points are markers at their own
+    frequencies (in the same unit as the integration's), not a line guessed between
+    them; a long title is wrapped, not clipped."""
+    f = [30.0, 37.0, 45.0]
+    hb, ni = wind_points(f), wind_points(f)
+    figures = _kept_figures(monkeypatch)
+    title = "wind turbine main gearbox, low-speed planetary stage: " * 4
+    _save.plot_verify(hb, ni, str(tmp_path / "verify.png"), title=title)
+    (fig,) = figures
+    drawn = [line for ax in fig.axes for line in ax.get_lines() if len(line.get_xdata())]
+    for line in drawn:
+        assert line.get_linestyle() in ("None", "")  # no line joins the points
+        np.testing.assert_allclose(line.get_xdata(), f)  # both in Hz
+    assert {line.get_marker() for line in drawn} == {"+", "o"}
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "harmonic balance" in labels and "converged" in labels
+    lines = fig._suptitle.get_text().split("\n")
+    assert len(lines) > 1 and all(len(l) <= _save.TITLE_WIDTH for l in lines)

@@ -278,6 +278,31 @@ def test_optimiser_improves_and_returns_an_admissible_design(small):
         "design", "frequency", "mesh")
 
 
+def test_optimiser_without_a_band_takes_the_one_a_sweep_of_the_gear_chooses(small,
+                                                                            monkeypatch):
+    """No band: the band a sweep of this gear chooses from its modes (not the paper's
+    2-15 kHz), said before the work (stopped where the band is checked: the rest of the
+    optimisation is that of a given band)."""
+    from gearjax._studies.optimize import driver as _driver
+    from gearjax._studies.sweep.default_band import default_band
+
+    class Checked(Exception):
+        pass
+
+    def check_band(band_hz):
+        raise Checked(band_hz)
+
+    monkeypatch.setattr(_driver, "check_band", check_band)
+    train, said = gj.load_train(small), []
+    with pytest.raises(Checked) as band:
+        O.optimize(train, "low", None, settings=TINY_SETTINGS, progress=said.append)
+    chosen = default_band(gj.gear_case(train, "low", None, True, torus=True))
+    assert band.value.args[0] == pytest.approx((chosen.from_hz, chosen.to_hz))
+    assert band.value.args[0] != pytest.approx((2000.0, 15000.0))
+    assert said == [f"optimize: no band given: {chosen.from_hz:.1f}-{chosen.to_hz:.1f} Hz, "
+                    f"chosen {chosen.reason}"]
+
+
 def test_nonlinear_tier_never_makes_the_peak_with_backlash_worse(small):
     train = gj.load_train(small)
     settings = O.OptimizeSettings(proxy_points=32, phase_grid=4, screen=2, screen_points=6,

@@ -270,7 +270,10 @@ def test_linear_refusal_names_the_near_rigid_mode(capsys, idler):
     # an undamped mode of frequency f over one period T: |exp(2 pi i f T) - 1|
     assert data["fold_distance"] == pytest.approx(
         abs(np.exp(2j * np.pi * mode["hz"] / 6000) - 1), rel=1e-3)
-    (line,) = [e for e in err.splitlines() if not e.startswith("warning:")]
+    said = [e for e in err.splitlines() if e.startswith("sensitivity: ")]
+    assert said[0].startswith("sensitivity: solving gear ") and "6000 Hz (K = " in said[0]
+    assert said[-1].startswith("sensitivity: done in ")
+    (line,) = [e for e in err.splitlines() if not e.startswith(("warning:", "sensitivity: "))]
     assert line.startswith("gearjax: the linear response at 6000 Hz has no fold, but a "
                            f"lightly damped near-rigid mode ({mode['hz']:.4g} Hz, damping "
                            "ratio ")

@@ -42,6 +42,7 @@ from ..._gear.planet_sets import (
 from ..._gear.train import Train
 from .. import harmonics as _harmonics
 from ..design import orders_of, peak_of
+from ..sweep.default_band import default_band
 from .nonlinear import NONLINEAR_RTOL, BandSettings, NonlinearBand, nonlinear_band
 from .proxy import proxy_screen
 from .ranking import RANK_RTOL, band_profile, leximax_order
@@ -76,7 +77,7 @@ class StageStudy:
 def optimize(
     train: Train,
     gear: str | None = None,
-    band_hz: tuple[float, float] = (2000.0, 15000.0),
+    band_hz: tuple[float, float] | None = None,
     vary: Sequence[str] | None = None,
     *,
     stage: str | None = None,
@@ -86,6 +87,8 @@ def optimize(
     """Planet sets and phases of ``gear`` that minimise the peak RMS mesh force over a band.
 
     **Arguments:** ``band_hz``: ``(lo, hi)`` reference-stage mesh frequencies (Hz);
+    ``None``: the band a sweep of the gear chooses from its modes and excitation orders
+    (:mod:`~gearjax._studies.sweep.default_band`), said through ``progress``;
     ``vary``: phasing paths (:mod:`.variables`; default
     :func:`.variables.default_vary`); ``stage``: the reference stage of the frequencies
     (default: the first turning one); ``settings``: :class:`OptimizeSettings`;
@@ -102,6 +105,11 @@ def optimize(
     say = progress or (lambda message: None)
     case = gear_case(train, gear, stage, linear=not settings.nonlinear, torus=True)
     g, ref, mu_ref, nominal = case.gear, case.stage, case.mu_ref, case.system
+    if band_hz is None:
+        chosen = default_band(case)
+        band_hz = (chosen.from_hz, chosen.to_hz)
+        say(f"optimize: no band given: {chosen.from_hz:.1f}-{chosen.to_hz:.1f} Hz, chosen "
+            f"{chosen.reason}")
     lo, hi = check_band(band_hz)
     check_settings(settings)
     variables = phasing_variables(train, g.name, vary)

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -230,6 +231,7 @@ def sensitivity(
     linear: bool = False,
     harmonics: int | None = None,
     fold_tol: float = FOLD_TOL,
+    progress: Callable[[str], None] | None = None,
 ) -> Sensitivity:
     """Derivatives of a mesh response at one frequency with respect to train parameters.
 
@@ -243,7 +245,8 @@ def sensitivity(
     same K on every angle, default the orders of
     :func:`~gearjax._studies.harmonics.torus_orders_rule`); ``fold_tol``: the fold
     test on ``min |mu - 1|`` (:func:`~gearjax._studies.sensitivity.point_status`,
-    :data:`~gearjax._studies.sensitivity.FOLD_TOL`).
+    :data:`~gearjax._studies.sensitivity.FOLD_TOL`); ``progress(message)``: called before
+    the solve, before the derivatives and at the end.
 
     The point is solved from the linear in-contact guess (with backlash, if Newton fails,
     from the orbit a time integration settles to, else by the backlash homotopy), so with
@@ -264,6 +267,11 @@ def sensitivity(
         raise bad_argument("at_hz", at_hz, "must be a positive mesh frequency in Hz")
     gp = GearPoint(train, gear, paths, stage, linear, harmonics, at_hz)
     j = None if mesh is None else mesh_index(gp.system, mesh)
+    say = progress or (lambda message: None)
+    t0 = time.perf_counter()
+    say(f"sensitivity: solving gear {gp.gear!r} at {at_hz:g} Hz (K = "
+        f"{_harmonics.orders_text(gp.settings.n_harmonics)}, {int(np.prod(gp.problem.shape))} unknowns; "
+        "the first call compiles)")
     sol = gp.solve(at_hz)
     omega = gp.omega(at_hz)
     converged = bool(sol.converged)
@@ -287,8 +295,12 @@ def sensitivity(
                            fold_distance=None,
                            message=f"the harmonic balance did not converge at {at_hz:g} Hz "
                                    f"({result_word(sol.result)}): no derivative")
+    say(f"sensitivity: the derivatives of mesh {common['mesh']}'s {response} with respect "
+        f"to {len(gp.paths)} parameters, and the point's stability "
+        f"({time.perf_counter() - t0:.1f} s so far)")
     pg, stable, distance = gp.differentiate(sol, at_hz, MeshResponse(field=field, mesh=j),
                                             fold_tol)
+    say(f"sensitivity: done in {time.perf_counter() - t0:.1f} s")
     status = dict(stable=stable, fold_distance=distance)
     mode = gp.refusal_mode(sol, at_hz, stable, distance, fold_tol)
     try:
