@@ -41,7 +41,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import warnings
 from collections.abc import Callable, Sequence
 
 import jax
@@ -58,7 +57,7 @@ from .._engine.system import System
 from .._gear.case import GearCase, gear_case, torus_fields
 from .._gear.toml_io import dumps_train
 from .._gear.train import Train
-from .validity import ContactLossWarning, contact_loss
+from .validity import warn_contact_loss
 
 DEFAULT_SWEEP_POINTS = 20
 """Points of a ``from_hz``/``to_hz`` sweep when ``points`` is not given."""
@@ -188,20 +187,28 @@ def time_shifted(system: System, tau0: float) -> System:
 
 
 def integrate_windowed(case: GearCase, f_hz, is_sweep: bool, x0=None, v0=None,
-                       settings: wd.Windowed | None = None,
-                       batch_size="auto") -> wd.WindowedResponse:
+                       settings: wd.Windowed | None = None, batch_size="auto",
+                       progress: Callable[[str], None] | None = None
+                       ) -> wd.WindowedResponse:
     """Windowed statistics of ``case`` at ``f_hz`` (Hz): independent points or a sweep
     (module docstring, "Quasi-periodic gears"). ``x0``, ``v0``: ``(n,)`` or ``(P, n)``
     start states (sweeps: ``(n,)``), None for the static solution in contact;
     ``settings``: :class:`~gearjax.Windowed` (default :data:`WINDOWED`); ``batch_size``
     as :func:`~gearjax.simulate_windowed_points` (``"auto"``: one point at a time on a
-    CPU, every point through the same compiled program).
+    CPU, every point through the same compiled program); ``progress(message)``: told
+    the windows as they run (:class:`WindowProgress`; the program then reports them,
+    ``Windowed.report``), the result computed before returning.
 
     **Returns:** a :class:`~gearjax.WindowedResponse` with a leading axis ``P``.
     **Raises:** ``ValueError`` as :func:`~gearjax.simulate_windowed` (a window too long,
     a tolerance below ``1 / n_beats``)."""
-    s = case.system
     settings = WINDOWED if settings is None else settings
+    if progress is not None:
+        settings = dataclasses.replace(settings, report=True)
+        with wd.window_reports(WindowProgress(progress, f_hz, settings)):
+            return jax.block_until_ready(
+                integrate_windowed(case, f_hz, is_sweep, x0, v0, settings, batch_size))
+    s = case.system
     omegas = case.omega(f_hz)
     if x0 is None:
         x0, v0 = td.contact_state(s)
@@ -364,7 +371,7 @@ def simulate_gear(
     f_hz, is_sweep = frequency_points(at_hz, from_hz, to_hz, points)
     case = gear_case(train, gear, stage, linear, torus=True)
     if case.G > 1:
-        return _warn_contact_loss(_simulate_torus(case, f_hz, is_sweep, x0, v0, windowed,
+        return warn_contact_loss(_simulate_torus(case, f_hz, is_sweep, x0, v0, windowed,
                                                   batch_size, progress, command, t0))
     if progress:
         progress(f"simulate: integrating {len(f_hz)} points "
@@ -375,19 +382,10 @@ def simulate_gear(
     if progress:
         progress(f"simulate: {len(f_hz)} points in {seconds:.1f} s")
     solver = {**solver_settings(settings), "linear": linear, "reference_stage": case.stage}
-    return _warn_contact_loss(trajectory_dataset(case, f_hz, tr, solver, attrs={
+    return warn_contact_loss(trajectory_dataset(case, f_hz, tr, solver, attrs={
         "kind": "simulate", "mode": "sweep" if is_sweep else "points",
         "start": "static contact" if x0 is None else "given",
         "seconds": seconds, "command": "" if command is None else command}))
-
-
-def _warn_contact_loss(ds):
-    """``ds``, after a :class:`~gearjax._studies.validity.ContactLossWarning` where its
-    linear results lose contact (:func:`~gearjax._studies.validity.contact_loss`)."""
-    loss = contact_loss(ds)
-    if loss is not None:
-        warnings.warn(ContactLossWarning(loss["warning"]), stacklevel=3)
-    return ds
 
 
 REPORT_EVERY_S = 10.0
@@ -429,7 +427,7 @@ class WindowProgress:
         differ = ("" if not math.isfinite(d) else
                   f", windows differ by {100 * d:.2g}% (agreement: within "
                   f"{100 * s.tol:g}%, {s.n_agree} in a row)")
-        self.progress(f"simulate: {where}: window {k} of at most {s.max_windows}, "
+        self.progress(f"integration: {where}: window {k} of at most {s.max_windows}, "
                       f"{int(np.max(steps))} solver steps{differ}; {elapsed:.0f} s, at most "
                       f"about {elapsed / self.windows * left_windows:.0f} s left")
 
@@ -445,15 +443,8 @@ def _simulate_torus(case: GearCase, f_hz, is_sweep: bool, x0, v0, settings, batc
                  f"{solver['window_periods']} base periods: the {case.G} frequency groups "
                  "are incommensurate, so the response is quasi-periodic (the first call "
                  "compiles)")
-    if progress:
-        settings = dataclasses.replace(WINDOWED if settings is None else settings,
-                                       report=True)
-        with wd.window_reports(WindowProgress(progress, f_hz, settings)):
-            out = integrate_windowed(case, f_hz, is_sweep, x0, v0, settings, batch_size)
-            jax.block_until_ready(out)
-    else:
-        out = integrate_windowed(case, f_hz, is_sweep, x0, v0, settings, batch_size)
-        jax.block_until_ready(out)
+    out = jax.block_until_ready(integrate_windowed(case, f_hz, is_sweep, x0, v0, settings,
+                                                   batch_size, progress=progress))
     seconds = time.perf_counter() - t0
     if progress:
         progress(f"simulate: {len(f_hz)} points in {seconds:.1f} s")

@@ -18,10 +18,11 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 
 import numpy as np
 
-__all__ = ["ContactLossWarning", "contact_loss", "result_band"]
+__all__ = ["ContactLossWarning", "contact_loss", "result_band", "warn_contact_loss"]
 
 
 class ContactLossWarning(UserWarning):
@@ -103,3 +104,13 @@ def _solver(ds) -> dict:
         return json.loads(text or "{}")
     except (TypeError, ValueError):
         return {}
+
+
+def warn_contact_loss(ds, stacklevel: int = 2):
+    """``ds``, after a :class:`ContactLossWarning` where its linear results lose contact
+    (:func:`contact_loss`); ``stacklevel`` as :func:`warnings.warn`'s, counted from the
+    caller."""
+    loss = contact_loss(ds)
+    if loss is not None:
+        warnings.warn(ContactLossWarning(loss["warning"]), stacklevel=stacklevel + 1)
+    return ds

@@ -69,6 +69,7 @@ from .._engine import windowed as wd
 from .._gear.case import torus_fields
 from .simulate import (frequency_points, integrate, integrate_windowed, solver_settings,
                        trajectory_dataset, windowed_dataset, windowed_settings)
+from .validity import warn_contact_loss
 from .sweep import backlash_start, newton, point_rows, resize_harmonics, solve_points, start_point
 from .._gear.toml_io import dumps_train
 from .._gear.train import Train
@@ -145,6 +146,10 @@ def verify_gear(
     :func:`~gearjax._gear.case.gear_case`; for a quasi-periodic gear as
     :func:`~gearjax._studies.simulate.simulate_gear` (a window too long, a ``windowed.tol``
     below ``1 / windowed.n_beats``).
+
+    **Warns:** :class:`~gearjax._studies.validity.ContactLossWarning` where a linear
+    verification's harmonic-balance mesh force alternates by more than the static one
+    (the teeth would leave contact), naming the first frequency.
     """
     t0 = time.perf_counter()
     f_hz, is_sweep = frequency_points(at_hz, from_hz, to_hz, points)
@@ -158,7 +163,7 @@ def verify_gear(
     say = progress or (lambda message: None)
     if case.G > 1:
         return _verify_torus(case, f_hz, is_sweep, harmonics, tolerance, windowed,
-                             batch_size, say, command, t0)
+                             batch_size, say, command, t0, progress)
 
     say(f"verify: harmonic balance at {len(f_hz)} points")
     hb = harmonic_balance_points(case, f_hz, harmonics, follow=is_sweep and case.has_backlash)
@@ -187,6 +192,7 @@ def verify_gear(
                                                      "long_name": "solution harmonics K"})
     ni_ds = trajectory_dataset(case, f_hz, tr, {**solver_settings(settings), **solver},
                                attrs={"start": "harmonic balance", "seconds": t_ni, **common})
+    warn_contact_loss(hb_ds)
     rms_hb, rms_ni, rel, ok = compare_rms(hb_ds, ni_ds, tolerance)
     return VerifyResult(hb=hb_ds, ni=ni_ds, rms_hb=rms_hb, rms_ni=rms_ni, rel_diff=rel, ok=ok,
                         tolerance=tolerance,
@@ -195,7 +201,7 @@ def verify_gear(
 
 
 def _verify_torus(case: GearCase, f_hz, is_sweep: bool, harmonics, tolerance: float,
-                  settings, batch_size, say, command, t0) -> VerifyResult:
+                  settings, batch_size, say, command, t0, progress=None) -> VerifyResult:
     """:func:`verify_gear` of a quasi-periodic gear: the torus harmonic balance against
     the windowed integration from its states (module docstring)."""
     solver = {"linear": case.linear, "reference_stage": case.stage,
@@ -212,7 +218,8 @@ def _verify_torus(case: GearCase, f_hz, is_sweep: bool, harmonics, tolerance: fl
     x_static, _ = td.contact_state(case.system)
     x0 = np.where(good[:, None], hb["x0"], np.asarray(x_static)[None, :])
     v0 = np.where(good[:, None], hb["v0"], 0.0)
-    out = integrate_windowed(case, f_hz, False, x0, v0, settings, batch_size)
+    out = integrate_windowed(case, f_hz, False, x0, v0, settings, batch_size,
+                             progress=progress)
     jax.block_until_ready(out)
     t_ni = time.perf_counter() - t0 - t_hb
     say(f"verify: integration done in {t_ni:.1f} s")
@@ -228,6 +235,7 @@ def _verify_torus(case: GearCase, f_hz, is_sweep: bool, harmonics, tolerance: fl
                                    "angle"})
     ni_ds = windowed_dataset(case, f_hz, out, ni_solver,
                              attrs={"start": "harmonic balance", "seconds": t_ni, **common})
+    warn_contact_loss(hb_ds, stacklevel=3)
     rms_hb, rms_ni, rel, ok = compare_rms(hb_ds, ni_ds, tolerance)
     return VerifyResult(hb=hb_ds, ni=ni_ds, rms_hb=rms_hb, rms_ni=rms_ni, rel_diff=rel, ok=ok,
                         tolerance=tolerance,

@@ -15,6 +15,7 @@ import gearjax as gj
 from gearjax._engine import continuation as _continuation
 from gearjax._io import journal as _journal
 from gearjax._studies import sweep as _sweep
+from gearjax._studies.sweep import refine as sweep_refine
 from gearjax._studies.sweep import segments as sweep_segments, starts
 from gearjax._cli import main
 
@@ -284,24 +285,33 @@ def test_cli_journal_without_resume_and_resume_without_out(capsys, full, tmp_pat
     assert code == 2 and "--resume = True: needs --out FILE" in err
 
 
-def test_linear_sweep_journals_per_segment_batch(train, tmp_path, monkeypatch):
+def test_linear_sweep_journals_its_points_solved_and_its_batch(train, tmp_path, monkeypatch):
+    """A linear segment journals each chunk of points as solved, then its batch: a run
+    interrupted while writing the batch, or before it, resumes to the same results
+    without solving again what the journal holds."""
     kw = dict(from_hz=2400.0, to_hz=2450.0, linear=True, harmonics=8, points=3)
     path = tmp_path / "lin.nc.journal"
     result = _sweep.sweep(train, "first", journal=path, **kw)
     data = path.read_bytes()
     lines = records(data)
-    assert len(lines) == 2 and _journal.decode(lines[1].rstrip(b"\n"))["type"] == "batch"
-    path.write_bytes(lines[0] + lines[1][:100])  # interrupted while writing the batch
+    kinds = [_journal.decode(line.rstrip(b"\n"))["type"] for line in lines[1:]]
+    assert kinds == ["solved", "batch"]  # three points, one chunk; a straight flank
+    path.write_bytes(b"".join(lines[:2]) + lines[2][:100])  # interrupted in the batch
     same_results(_sweep.sweep(train, "first", journal=path, resume=True, **kw).dataset,
                  result.dataset)
     assert path.read_bytes() == data
 
     def no(*args, **kwargs):
-        raise AssertionError("recomputed a journaled batch")
+        raise AssertionError("recomputed journaled points")
 
     monkeypatch.setattr(starts, "solve_points", no)
+    monkeypatch.setattr(sweep_refine, "solve_points", no)
     same_results(_sweep.sweep(train, "first", journal=path, resume=True, **kw).dataset,
                  result.dataset)
+    path.write_bytes(b"".join(lines[:2]))  # interrupted before the batch
+    same_results(_sweep.sweep(train, "first", journal=path, resume=True, **kw).dataset,
+                 result.dataset)
+    assert path.read_bytes() == data
 
 
 def test_resume_without_a_journal_starts_afresh(train, full, tmp_path, capsys):
@@ -363,10 +373,10 @@ def test_a_journal_with_integer_result_codes_resumes(train, tmp_path):
     kw = dict(from_hz=2400.0, to_hz=2450.0, linear=True, harmonics=8, points=3)
     path = tmp_path / "lin.nc.journal"
     result = _sweep.sweep(train, "first", journal=path, **kw)
-    head, batch = records(path.read_bytes())
+    head, solved, batch = records(path.read_bytes())
     rec = _journal.decode(batch.rstrip(b"\n"))
     assert list(rec["result"]) == ["converged"] * 3
     rec["result"] = np.zeros(3, np.int64)
-    path.write_bytes(head + _journal.encode(rec))
+    path.write_bytes(head + solved + _journal.encode(rec))
     same_results(_sweep.sweep(train, "first", journal=path, resume=True, **kw).dataset,
                  result.dataset)

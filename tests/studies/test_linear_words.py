@@ -166,3 +166,17 @@ def test_a_linear_time_integration_is_warned_too():
     # results with backlash model the separation themselves: nothing to warn of
     ds.attrs["solver"] = json.dumps({**json.loads(ds.attrs["solver"]), "linear": False})
     assert gj.contact_loss(ds) is None
+
+
+@pytest.mark.slow
+def test_a_linear_verification_is_warned_too():
+    """``verify --linear`` at the same 2.5 kHz (the integration's program above reused):
+    harmonic balance and integration agree, and the harmonic-balance result is warned
+    about where the teeth would leave contact, as a sweep's would be. Slow (about 18 s on
+    2 cores): it compiles verify's harmonic-balance programs for this train, which no
+    other test builds; the claim needs a verification, not a sweep."""
+    train = gj.load_train(TRAIN)
+    with pytest.warns(gj.ContactLossWarning, match=r"first at 2500\.0 Hz: .*\(mesh main\.rp"):
+        result = gj.verify_gear(train, at_hz=[2500.0], linear=True, harmonics=K)
+    assert bool(np.all(result.ok))
+    assert gj.contact_loss(result.hb)["mesh"] == gj.contact_loss(result.ni)["mesh"]

@@ -197,8 +197,14 @@ def test_simulate_command_json(monkeypatch, capsys, tmp_path, simulated):
     monkeypatch.setattr(_simulate, "WINDOWED", FAST)
     csv = tmp_path / "sim.csv"
     code = main(["simulate", str(TRAIN), "--at", "10500", "--json", "--out", str(csv)])
-    out = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
     assert code == 0 and out["mode"] == "points" and out["solver"]["window_periods"] == 160
+    # its windows reported as they ran (the first one at least), in the settings' words
+    windows = [l for l in captured.err.splitlines() if l.startswith("integration: ")]
+    assert windows[0].startswith("integration: point 1 of 1 (10500.0 Hz): window 1 of at "
+                                 f"most {FAST.max_windows}, ")
+    assert "report" not in out["solver"]
     (p,) = out["points"]
     assert p["result"] == "quasi_periodic" and p["converged"] and p["stable"] is None
     assert p["period"] is None and "quasi-periodic" in p["period_reason"]

@@ -22,9 +22,9 @@ def test_each_point_reports_its_first_window_then_at_most_one_line_per_interval(
         for k in range(1, 5):
             listen(np.asarray(k), np.asarray(100 * k), np.asarray(np.nan if k == 1 else 0.1 / k))
     assert len(lines) == 2  # each point's first window; the rest within the interval
-    assert lines[0].startswith("simulate: point 1 of 2 (36.0 Hz): window 1 of at most 6, "
+    assert lines[0].startswith("integration: point 1 of 2 (36.0 Hz): window 1 of at most 6, "
                                "100 solver steps; ")
-    assert lines[1].startswith("simulate: point 2 of 2 (37.5 Hz): window 1 of at most 6, ")
+    assert lines[1].startswith("integration: point 2 of 2 (37.5 Hz): window 1 of at most 6, ")
     # the time left is bounded by every window the run may still integrate
     left = float(lines[1].split("at most about ")[1].split(" s left")[0])
     assert math.isfinite(left) and left >= 0
@@ -47,7 +47,7 @@ def test_a_vmapped_batch_is_reported_as_points_at_once(monkeypatch):
     listen = _simulate.WindowProgress(lines.append, [30.0, 40.0, 45.0], gj.Windowed())
     listen(np.asarray([1, 1, 1]), np.asarray([5, 6, 7]), np.full(3, np.nan))
     listen(np.asarray([2, 2, 2]), np.asarray([9, 12, 14]), np.asarray([0.5, np.nan, 0.2]))
-    assert lines[0].startswith("simulate: 3 points at once: window 1 of at most 32, 7 solver")
+    assert lines[0].startswith("integration: 3 points at once: window 1 of at most 32, 7 solver")
     assert "windows differ by 50%" in lines[1]
 
 

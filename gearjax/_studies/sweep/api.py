@@ -15,7 +15,7 @@ from ..._gear.toml_io import dumps_train
 from ..._gear.train import Train
 from .. import concurrency
 from .. import harmonics as _harmonics
-from ..validity import ContactLossWarning, contact_loss
+from ..validity import warn_contact_loss
 from . import completion as _completion
 from . import seeds as _seeds
 from . import segments as _segments
@@ -208,9 +208,7 @@ def sweep(
                               command="" if command is None else command,
                               branches=branches)
     phases.end("results")
-    loss = contact_loss(ds)
-    if loss is not None:
-        warnings.warn(ContactLossWarning(loss["warning"]), stacklevel=2)
+    warn_contact_loss(ds)
     return SweepResult(dataset=ds, folds_hz=tuple(folds), stop=walk.stop,
                        segments=tuple(walk.segments), seconds=time.perf_counter() - t_start,
                        restarts=tuple(walk.restarts), branches=tuple(branches or ()),
