@@ -105,6 +105,11 @@ def frequency_points(at_hz: Sequence[float] | None = None, from_hz: float | None
     return np.linspace(float(from_hz), float(to_hz), int(points)), True
 
 
+REPORT_EVERY_S = 10.0
+"""Seconds between two lines of an integration's progress (the first point, or the first
+window of each point of a quasi-periodic gear, is always reported)."""
+
+
 def _batch_size(batch_size):
     """``"auto"``: one point at a time on a CPU (a vmapped batch advances in lock-step, see
     :func:`~gearjax.simulate_points`), the whole batch vmapped on an accelerator."""
@@ -114,16 +119,39 @@ def _batch_size(batch_size):
 
 
 def integrate(case: GearCase, f_hz, is_sweep: bool, x0=None, v0=None,
-              settings: td.TimeDomain = td.TimeDomain(), batch_size="auto") -> td.Trajectory:
+              settings: td.TimeDomain = td.TimeDomain(), batch_size="auto",
+              progress: Callable[[str], None] | None = None) -> td.Trajectory:
     """Steady states of ``case`` at ``f_hz`` (Hz): independent points or a sweep (see the
     module docstring). ``x0``, ``v0``: ``(n,)`` or ``(P, n)`` start states (rad or m, and
-    per s), None for the static solution in contact. **Returns:** a
-    :class:`~gearjax.Trajectory` with a leading axis ``P``."""
+    per s), None for the static solution in contact; ``progress(message)``: where points
+    run one at a time (a CPU), told each point as it ends (the first, then at most a
+    line every :data:`REPORT_EVERY_S` seconds, and the last), with the time left at the
+    pace so far. **Returns:** a :class:`~gearjax.Trajectory` with a leading axis ``P``."""
     omegas = case.omega(f_hz)
     if is_sweep:
         return td.simulate_sweep(case.system, omegas, x0=x0, v0=v0, settings=settings)
-    return td.simulate_points(case.system, omegas, x0=x0, v0=v0, settings=settings,
-                              batch_size=_batch_size(batch_size))
+    size = _batch_size(batch_size)
+    if progress is None or size != 1 or len(omegas) < 2:
+        return td.simulate_points(case.system, omegas, x0=x0, v0=v0, settings=settings,
+                                  batch_size=size)
+    P, t0, shown, parts = len(omegas), time.perf_counter(), -math.inf, []
+
+    def own(a, i):  # a point's start state: shared (n,) or its row of (P, n)
+        return a if a is None or np.ndim(a) == 1 else a[i:i + 1]
+
+    for i in range(P):
+        tr = jax.block_until_ready(td.simulate_points(
+            case.system, omegas[i:i + 1], x0=own(x0, i), v0=own(v0, i), settings=settings,
+            batch_size=1))
+        parts.append(tr)
+        now = time.perf_counter()
+        if i in (0, P - 1) or now - shown >= REPORT_EVERY_S:
+            shown = now
+            progress(f"integration: point {i + 1} of {P} ({float(f_hz[i]):.1f} Hz): "
+                     f"{int(np.asarray(tr.stats['num_steps'])[0])} solver steps, "
+                     f"{result_word(tr.result)[0]}; {now - t0:.0f} s, about "
+                     f"{(now - t0) / (i + 1) * (P - i - 1):.0f} s left")
+    return jax.tree.map(lambda *a: jnp.concatenate(a), *parts)
 
 
 def trajectory_dataset(case: GearCase, f_hz, tr: td.Trajectory, solver: dict | None = None,
@@ -344,8 +372,9 @@ def simulate_gear(
       solution in contact (:func:`~gearjax.contact_state`);
     - ``settings``: :class:`~gearjax.TimeDomain`; ``batch_size``: as
       :func:`~gearjax.simulate_points` (``"auto"``: 1 on a CPU, all on an accelerator);
-    - ``progress(message)``: called before and after the integration, and for a
-      quasi-periodic gear as its windows are integrated (:class:`WindowProgress`);
+    - ``progress(message)``: called before and after the integration, as points end
+      where they run one at a time (:func:`integrate`), and for a quasi-periodic gear
+      as its windows are integrated (:class:`WindowProgress`);
     - ``command``: how the simulation was asked for, kept as the ``command`` attribute
       (default: empty);
     - ``windowed``: :class:`~gearjax.Windowed` settings of a quasi-periodic gear
@@ -376,7 +405,7 @@ def simulate_gear(
     if progress:
         progress(f"simulate: integrating {len(f_hz)} points "
                  f"({'sweep' if is_sweep else 'independent'}; the first call compiles)")
-    tr = integrate(case, f_hz, is_sweep, x0, v0, settings, batch_size)
+    tr = integrate(case, f_hz, is_sweep, x0, v0, settings, batch_size, progress=progress)
     jax.block_until_ready(tr)
     seconds = time.perf_counter() - t0
     if progress:
@@ -386,11 +415,6 @@ def simulate_gear(
         "kind": "simulate", "mode": "sweep" if is_sweep else "points",
         "start": "static contact" if x0 is None else "given",
         "seconds": seconds, "command": "" if command is None else command}))
-
-
-REPORT_EVERY_S = 10.0
-"""Seconds between two lines of a windowed integration's progress (the first window of
-each point is always reported)."""
 
 
 class WindowProgress:

@@ -175,7 +175,7 @@ def verify_gear(
     good = hb["result"] == result_word(RESULTS.successful)
     x0 = jnp.where(good[:, None], x0, x_static[None, :])
     v0 = jnp.where(good[:, None], v0, 0.0)
-    tr = integrate(case, f_hz, False, x0, v0, settings, batch_size)
+    tr = integrate(case, f_hz, False, x0, v0, settings, batch_size, progress=progress)
     jax.block_until_ready(tr)
     t_ni = time.perf_counter() - t0 - t_hb
     say(f"verify: integration done in {t_ni:.1f} s")

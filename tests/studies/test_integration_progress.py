@@ -1,5 +1,6 @@
-"""A windowed integration's progress (issue 51, item 1): the lines a quasi-periodic
-``simulate`` writes as its windows run, from the engine's window reports."""
+"""An integration's progress (issue 51, item 1): the lines ``simulate`` and ``verify``
+write as points end (one at a time on a CPU) and, for a quasi-periodic gear, as its
+windows run, from the engine's window reports."""
 
 import math
 import pathlib
@@ -59,3 +60,22 @@ def test_window_reports_are_not_in_the_results_settings():
     plain = _simulate.windowed_settings(case, gj.Windowed())
     told = _simulate.windowed_settings(case, gj.Windowed(report=True))
     assert "report" not in told and told == plain and plain["max_windows"] == 32
+
+
+def test_points_run_one_at_a_time_are_reported_as_they_end(monkeypatch):
+    """A five-planet helicopter stage, linear, two points: a line per point (its steps,
+    its result, the time left) and the same results as the batch without progress."""
+    monkeypatch.setattr(_simulate, "REPORT_EVERY_S", 0.0)
+    train = gj.load_train(DATA / "helicopter_five_planets.toml")
+    lines, f = [], [2500.0, 2600.0]
+    with pytest.warns(gj.ContactLossWarning):
+        told = gj.simulate_gear(train, at_hz=f, linear=True, progress=lines.append)
+        batch = gj.simulate_gear(train, at_hz=f, linear=True)
+    points = [l for l in lines if l.startswith("integration: ")]
+    assert [p.split(":")[1] for p in points] == [" point 1 of 2 (2500.0 Hz)",
+                                                 " point 2 of 2 (2600.0 Hz)"]
+    assert all(", converged; " in p and p.endswith(" s left") for p in points)
+    steps = [int(p.split("): ")[1].split(" solver steps")[0]) for p in points]
+    assert steps == told["num_steps"].values.tolist()
+    np.testing.assert_allclose(told["rms_force"].values, batch["rms_force"].values,
+                               rtol=1e-10)
