@@ -11,7 +11,9 @@ the next round; elsewhere the checked middle is dropped (the line holds there). 
 the middles of intervals whose neighbours' curvature makes the line suspect are solved
 (:data:`SCREEN`). Where the response has no bound (inside a parametric instability,
 where the periodic solution is unstable and the plot dashes it) the halvings stop after
-:data:`MAX_ROUNDS`.
+:data:`MAX_ROUNDS`. The points solved are capped (a sweep's ``max_points``); a
+refinement stopped by either with lines still suspect says how many
+(:class:`Refined`, :func:`refinement_warning`).
 """
 
 from __future__ import annotations
@@ -184,8 +186,8 @@ def refine_linear(problem, omegas, F_static, end_omega=None, *,
     for k in range(MAX_ROUNDS + 1):
         floor = RMS_FLOOR * np.maximum(np.max(np.abs(values), axis=0), 1e-300)
         estimate = _line_error_estimate(w, values, floor) if w.size > 1 else np.zeros(0)
-        todo = np.flatnonzero(active & (estimate > SCREEN * tolerance))
-        room = cap - solve.solved
+        suspect = np.flatnonzero(active & (estimate > SCREEN * tolerance))
+        todo, room = suspect, cap - solve.solved
         if todo.size == 0 or k == MAX_ROUNDS or room <= 0:
             if todo.size:
                 unresolved, stopped = todo.size, ("max_rounds" if k == MAX_ROUNDS
@@ -193,8 +195,7 @@ def refine_linear(problem, omegas, F_static, end_omega=None, *,
             break
         if todo.size > room:  # the largest predicted errors first; the rest wait
             todo = np.sort(todo[np.argsort(-estimate[todo], kind="stable")[:room]])
-        waiting = w[np.setdiff1d(np.flatnonzero(active & (estimate > SCREEN * tolerance)),
-                                 todo)]  # left ends of the suspect intervals not solved
+        waiting = w[np.setdiff1d(suspect, todo)]  # left ends of suspect intervals left
         if say is not None:
             say(f"sweep: refinement round {k + 1} of at most {MAX_ROUNDS}: {todo.size} "
                 f"middles where a straight line may miss the curve by more than "
