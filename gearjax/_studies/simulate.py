@@ -124,14 +124,14 @@ def integrate(case: GearCase, f_hz, is_sweep: bool, x0=None, v0=None,
     """Steady states of ``case`` at ``f_hz`` (Hz): independent points or a sweep (see the
     module docstring). ``x0``, ``v0``: ``(n,)`` or ``(P, n)`` start states (rad or m, and
     per s), None for the static solution in contact; ``progress(message)``: where points
-    run one at a time (a CPU), told each point as it ends (the first, then at most a
-    line every :data:`REPORT_EVERY_S` seconds, and the last), with the time left at the
-    pace so far. **Returns:** a :class:`~gearjax.Trajectory` with a leading axis ``P``."""
+    run one at a time (a sweep, or independent points on a CPU), told each point as it
+    ends (the first, then at most a line every :data:`REPORT_EVERY_S` seconds, and the
+    last), with the time left at the pace so far. **Returns:** a :class:`~gearjax.Trajectory` with a leading axis ``P``."""
     omegas = case.omega(f_hz)
-    if is_sweep:
-        return td.simulate_sweep(case.system, omegas, x0=x0, v0=v0, settings=settings)
     size = _batch_size(batch_size)
-    if progress is None or size != 1 or len(omegas) < 2:
+    if progress is None or len(omegas) < 2 or (size != 1 and not is_sweep):
+        if is_sweep:
+            return td.simulate_sweep(case.system, omegas, x0=x0, v0=v0, settings=settings)
         return td.simulate_points(case.system, omegas, x0=x0, v0=v0, settings=settings,
                                   batch_size=size)
     P, t0, shown, parts = len(omegas), time.perf_counter(), -math.inf, []
@@ -140,9 +140,15 @@ def integrate(case: GearCase, f_hz, is_sweep: bool, x0=None, v0=None,
         return a if a is None or np.ndim(a) == 1 else a[i:i + 1]
 
     for i in range(P):
-        tr = jax.block_until_ready(td.simulate_points(
-            case.system, omegas[i:i + 1], x0=own(x0, i), v0=own(v0, i), settings=settings,
-            batch_size=1))
+        if is_sweep:  # from the end state of the point before (its own where it failed)
+            tr = jax.block_until_ready(td.simulate_sweep(
+                case.system, omegas[i:i + 1], x0=x0, v0=v0, settings=settings))
+            if bool(np.asarray(tr.integrated)[0]):
+                x0, v0 = tr.x_end[0], tr.v_end[0]
+        else:
+            tr = jax.block_until_ready(td.simulate_points(
+                case.system, omegas[i:i + 1], x0=own(x0, i), v0=own(v0, i),
+                settings=settings, batch_size=1))
         parts.append(tr)
         now = time.perf_counter()
         if i in (0, P - 1) or now - shown >= REPORT_EVERY_S:

@@ -79,3 +79,23 @@ def test_points_run_one_at_a_time_are_reported_as_they_end(monkeypatch):
     assert steps == told["num_steps"].values.tolist()
     np.testing.assert_allclose(told["rms_force"].values, batch["rms_force"].values,
                                rtol=1e-10)
+
+
+@pytest.mark.slow
+def test_a_sweep_is_reported_point_by_point_and_continues_as_in_one_call(monkeypatch):
+    """The same stage swept up over two points: each point starts from the end of the one
+    before, as the single compiled sweep does (same results). Slow (10-18 s on 2 cores):
+    the claim compares two compiled sweeps, of one point and of two."""
+    monkeypatch.setattr(_simulate, "REPORT_EVERY_S", 0.0)
+    train = gj.load_train(DATA / "helicopter_five_planets.toml")
+    lines = []
+    with pytest.warns(gj.ContactLossWarning):
+        told = gj.simulate_gear(train, from_hz=2500.0, to_hz=2600.0, points=2, linear=True,
+                                progress=lines.append)
+        whole = gj.simulate_gear(train, from_hz=2500.0, to_hz=2600.0, points=2, linear=True)
+    points = [l for l in lines if l.startswith("integration: ")]
+    assert [p.split(":")[1] for p in points] == [" point 1 of 2 (2500.0 Hz)",
+                                                 " point 2 of 2 (2600.0 Hz)"]
+    np.testing.assert_allclose(told["rms_force"].values, whole["rms_force"].values,
+                               rtol=1e-10)
+    np.testing.assert_array_equal(told["num_steps"].values, whole["num_steps"].values)
