@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..harmonics import TRUNCATION_TARGET
 from .point import Sensitivity
 from .steps import RANKING_RULE
 
@@ -32,7 +33,9 @@ def sensitivity_json(result: Sensitivity, top: int | None = None) -> dict:
     ``relative = (step/R) dR/dp`` is taken over); ``harmonics`` is K, or on a torus the
     list of orders per angle, and ``torus`` what the torus study solved
     (:func:`~gearjax._gear.case.torus_fields`; null for a periodic gear); ``mode``: the
-    mode a linear point was refused for (null otherwise)."""
+    mode a linear point was refused for (null otherwise); ``truncation``: the point's a
+    posteriori truncation checks (``K``, ``K_check``, ``change``; against
+    ``truncation_target``)."""
     out = {
         "gear": result.gear,
         "reference_stage": result.reference_stage,
@@ -56,6 +59,8 @@ def sensitivity_json(result: Sensitivity, top: int | None = None) -> dict:
         "ranking": RANKING_RULE,
         "derivatives": [],
         "torus": result.torus,
+        "truncation": list(result.truncation),
+        "truncation_target": TRUNCATION_TARGET,
     }
     if result.derivative is None:
         out["derivatives"] = None

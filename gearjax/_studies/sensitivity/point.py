@@ -26,6 +26,7 @@ from ..._gear.case import gear_case, torus_fields
 from ..._gear.train import Train
 from .. import harmonics as _harmonics
 from ..sweep import backlash_start
+from ..point_truncation import checked_orders
 from .family import RESPONSE_UNITS, GearFamily, MeshResponse, check_paths, response_field
 from .implicit import (FOLD_TOL, SensitivityRefused, check_point, implicit_gradient,
                        point_status, slow_mode, solve_at)
@@ -63,7 +64,10 @@ class Sensitivity:
       ``None`` where ``s`` is the value, else the rule in words; ``relative``: ``(s /
       R) dR/dp``, what :meth:`ranking` ranks (``None`` when refused);
     - ``mode``: where a linear point is refused next to a lightly damped mode, that mode
-      (:func:`~gearjax._studies.sensitivity.implicit.slow_mode`), else ``None``.
+      (:func:`~gearjax._studies.sensitivity.implicit.slow_mode`), else ``None``;
+    - ``truncation``: the a posteriori truncation checks of the point
+      (:func:`~gearjax._studies.point_truncation.checked_orders`: ``K``, ``K_check``,
+      ``change``), ``harmonics`` the orders they kept.
     """
 
     gear: str
@@ -94,6 +98,7 @@ class Sensitivity:
     step_rules: tuple[str | None, ...] = ()
     relative: np.ndarray | None = None
     mode: dict | None = None
+    truncation: tuple[dict, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -137,7 +142,7 @@ class GearPoint:
     """
 
     def __init__(self, train: Train, gear, paths, stage, linear, harmonics, f_hz):
-        case = gear_case(train, gear, stage, linear, torus=True)
+        case = self.case = gear_case(train, gear, stage, linear, torus=True)
         self.ref, self.mu_ref = case.stage, case.mu_ref
         self.gear, self.train, self.linear = case.gear.name, train, linear
         self.torus = torus_fields(case)
@@ -160,10 +165,35 @@ class GearPoint:
                 float(f.min()) / self.mu_ref, _harmonics.excitation_floor(case.system),
                 cutoff_hz=_harmonics.response_cutoff_hz(case.system))
         _harmonics.require_size(case.system, K, mu=case.mu)
-        self.settings = _harmonics.settings_for(case.system, K)
+        self.use_orders(K)
+        self.has_backlash = self.system.has_backlash
+
+    def use_orders(self, K) -> None:
+        """Solve with K harmonics (orders per angle on a torus) from now on."""
+        self.settings = _harmonics.settings_for(self.case.system, K)
         self.problem = _problem_jit(self.family, self.theta, self.settings)
         self.system = self.problem.system
-        self.has_backlash = self.system.has_backlash
+
+    def checked_solve(self, f_hz: float, fixed: bool) -> tuple[_hb.HBSolution, list]:
+        """:meth:`solve` at ``f_hz``, then its truncation checked a posteriori as a sweep
+        checks a segment's (:func:`~gearjax._studies.point_truncation.checked_orders`):
+        where the estimate exceeds the target the orders are raised and the point solved
+        again from its solution, unless ``fixed`` (the caller's K, kept and warned
+        about).
+        **Returns:** ``(solution, estimates)`` (no estimate where the point did not
+        converge)."""
+        sol = self.solve(f_hz)
+        if not bool(sol.converged):
+            return sol, []
+        K = self.settings.n_harmonics
+        K_new, y, estimates = checked_orders(self.case, {K: self.problem}, K, sol.y,
+                                             self.omega(f_hz), fixed=fixed,
+                                             command="sensitivity")
+        if K_new != K:
+            self.use_orders(K_new)
+            X0 = jnp.asarray(y).reshape(self.problem.shape) * self.problem.x_scale
+            sol = self.solve(f_hz, X0)
+        return sol, estimates
 
     def omega(self, f_hz: float) -> float:
         """The base frequency (rad/s) of the reference-stage mesh frequency ``f_hz`` (Hz)."""
@@ -272,7 +302,7 @@ def sensitivity(
     say(f"sensitivity: solving gear {gp.gear!r} at {at_hz:g} Hz (K = "
         f"{_harmonics.orders_text(gp.settings.n_harmonics)}, {int(np.prod(gp.problem.shape))} unknowns; "
         "the first call compiles)")
-    sol = gp.solve(at_hz)
+    sol, truncation = gp.checked_solve(at_hz, fixed=harmonics is not None)
     omega = gp.omega(at_hz)
     converged = bool(sol.converged)
     values = np.asarray(getattr(_responses_jit(gp.problem, sol.X, jnp.asarray(omega)), field))
@@ -285,7 +315,8 @@ def sensitivity(
                   response=response, unit=RESPONSE_UNITS[response], fold_tol=fold_tol,
                   mesh=gp.system.mesh_labels[j], value=float(values[j]), converged=converged,
                   paths=gp.paths, values=np.asarray(gp.theta),
-                  meshes=tuple(gp.system.mesh_labels), mesh_values=values, torus=gp.torus)
+                  meshes=tuple(gp.system.mesh_labels), mesh_values=values, torus=gp.torus,
+                  truncation=tuple(truncation))
     steps, rules = parameter_steps(train, gp.paths, np.asarray(gp.theta))
     common.update(steps=steps, step_rules=rules)
     refused = dict(derivative=None, normalised=None, partial=None)
