@@ -126,7 +126,8 @@ def integrate(case: GearCase, f_hz, is_sweep: bool, x0=None, v0=None,
     per s), None for the static solution in contact; ``progress(message)``: where points
     run one at a time (a sweep, or independent points on a CPU), told each point as it
     ends (the first, then at most a line every :data:`REPORT_EVERY_S` seconds, and the
-    last), with the time left at the pace so far. **Returns:** a :class:`~gearjax.Trajectory` with a leading axis ``P``."""
+    last), with the time left at the pace so far. **Returns:** a
+    :class:`~gearjax.Trajectory` with a leading axis ``P``."""
     omegas = case.omega(f_hz)
     size = _batch_size(batch_size)
     if progress is None or len(omegas) < 2 or (size != 1 and not is_sweep):

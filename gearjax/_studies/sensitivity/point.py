@@ -300,8 +300,9 @@ def sensitivity(
     say = progress or (lambda message: None)
     t0 = time.perf_counter()
     say(f"sensitivity: solving gear {gp.gear!r} at {at_hz:g} Hz (K = "
-        f"{_harmonics.orders_text(gp.settings.n_harmonics)}, {int(np.prod(gp.problem.shape))} unknowns; "
-        "the first call compiles)")
+        f"{_harmonics.orders_text(gp.settings.n_harmonics)}, "
+        f"{int(np.prod(gp.problem.shape))} unknowns; the first call compiles), then its "
+        "truncation checked against doubled orders")
     sol, truncation = gp.checked_solve(at_hz, fixed=harmonics is not None)
     omega = gp.omega(at_hz)
     converged = bool(sol.converged)

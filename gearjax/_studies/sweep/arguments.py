@@ -14,8 +14,9 @@ def check_arguments(from_hz, to_hz, *, eta, smoothing, harmonics, max_step_hz, p
     sweep.
 
     **Raises:** ``ArgumentError`` naming the argument (``from_hz``, ``to_hz``, ``eta``,
-    ``smoothing``, ``harmonics``, ``max_step_hz``, ``points``, ``max_points``, ``seeds``); ``linear``: a linear sweep, whose grid of
-    ``points`` must fit in ``max_points``."""
+    ``smoothing``, ``harmonics``, ``max_step_hz``, ``points``, ``max_points``,
+    ``seeds``); ``linear``: a linear sweep, whose grid of ``points`` must fit in
+    ``max_points``."""
     def integer(value) -> bool:
         return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 

@@ -34,10 +34,10 @@ class SweepProgress:
     ``to_hz`` (a continuation turning back at a fold does not move it back; time left:
     tqdm's estimate from the rate across the band) and shows the frequency, the points
     and the branches; where not ``live``, a plain line (:meth:`final_line`'s words so
-    far) every :data:`PLAIN_EVERY_S` seconds at most. :meth:`close` removes the bar and writes one final line (points,
-    branches, furthest frequency, elapsed seconds), also where not ``live``; nothing is
-    written when no point was reported (a sweep refused before its first point). A
-    context manager: leaving it closes.
+    far) every :data:`PLAIN_EVERY_S` seconds at most. :meth:`close` removes the bar
+    and writes one final line (points, branches, furthest frequency, elapsed seconds),
+    also where not ``live``; nothing is written when no point was reported (a sweep
+    refused before its first point). A context manager: leaving it closes.
     """
 
     def __init__(self, from_hz: float, to_hz: float, stream=sys.stderr, *, live: bool = True):
