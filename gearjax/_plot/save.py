@@ -306,7 +306,7 @@ POINT_MARKER = "+"
 solutions that are not neighbours on a branch)."""
 
 
-def _line_of(ax, line, y, color, label, scale: float = 1e3) -> None:
+def _line_of(ax, line, y, color, label, scale: float) -> None:
     """The harmonic-balance response of :func:`plot_points` against frequency in units of
     ``scale`` Hz: a sweep (a ``branch`` variable) as lines in the order swept, per branch
     and by stability as :func:`plot_sweep`; other points as markers

@@ -105,16 +105,15 @@ def optimize(
     say = progress or (lambda message: None)
     case = gear_case(train, gear, stage, linear=not settings.nonlinear, torus=True)
     g, ref, mu_ref, nominal = case.gear, case.stage, case.mu_ref, case.system
-    if band_hz is not None:
-        check_band(band_hz)
+    band = None if band_hz is None else check_band(band_hz)
     check_settings(settings)
     variables = phasing_variables(train, g.name, vary)
-    if band_hz is None:  # the inputs are valid: choose the band, and say it
+    if band is None:  # the inputs are valid: choose the band, and say it
         chosen = default_band(case)
-        band_hz = (chosen.from_hz, chosen.to_hz)
         say(f"optimize: no band given: {chosen.from_hz:.1f}-{chosen.to_hz:.1f} Hz, chosen "
             f"{chosen.reason}")
-    lo, hi = check_band(band_hz)
+        band = check_band((chosen.from_hz, chosen.to_hz))
+    lo, hi = band
     paths = tuple(p for v in variables for p in v.paths)
     K = orders_of(nominal, settings.harmonics)  # a tuple of orders per angle on a torus
     # the sweeps take one K for every angle

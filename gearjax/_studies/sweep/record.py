@@ -24,9 +24,10 @@ from ..harmonics import as_orders, orders_text
 def run_fields(train_toml: str, *, gear: str, stage: str, from_hz, to_hz, linear: bool,
                harmonics, eta: int, max_step_hz, smoothing, points: int,
                max_points: int, complete: bool = True, seeds: int = 0) -> dict:
-    """The fields of a sweep's journal header: everything its results depend on. The keys
-    are those of version-1 journals (the command line's words for the arguments), so
-    journals written before still resume; a refusal names the key that differs. The
+    """The fields of a sweep's journal header: everything its results depend on, under
+    the command line's words for the arguments; a refusal names the key that differs
+    (``--max-points`` bounds a linear sweep's refinement too, so a linear journal
+    without it is refused, naming it). The
     completion's fields (:mod:`~gearjax._studies.sweep.completion`) are there only where
     they differ from the default: ``--no-complete`` where a non-linear sweep is not
     completed, ``--seeds`` where it has integration seeds (a journal written before the

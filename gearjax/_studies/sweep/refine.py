@@ -66,8 +66,8 @@ class ReplayError(ValueError):
 
 
 REPORT_CHUNK = 32
-"""Points solved between two progress reports (and two journal records): a report every
-few seconds on a large problem, a journal that loses at most this many points."""
+"""Points solved between two progress reports and two journal records (an interrupted
+refinement loses at most this many points)."""
 
 
 @dataclasses.dataclass
