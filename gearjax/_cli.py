@@ -1054,6 +1054,8 @@ def _verify_cmd(args, train, notes) -> int:
         print(f"{p['mesh_frequency_hz']:>9.1f} {K:>{kw}} {_last_estimate(p):>10} "
               f"{p['result_hb']:>10} "
               f"{p['result_ni']:>{nw}} {stable:>6} " + tail + flag)
+        if p.get("shortfall_reason"):
+            print(f"{'':>9} {p['shortfall_reason']}")
     if args.out:
         print(f"results written to {args.out}")
     if args.plot:

@@ -83,6 +83,7 @@ def responses_from_samples(
     b: Float[Array, "*batch m"],
     F_static: Float[Array, "*batch m"],
     radius: Float[Array, "*batch m"],
+    weights: Float[Array, " T"] | None = None,
 ) -> MeshResponses:
     """Per-mesh statistics of samples over one period: the one definition of the responses.
 
@@ -94,25 +95,34 @@ def responses_from_samples(
     - ``b``: half backlash (m), ``(..., m)``;
     - ``F_static``: static mesh forces (N), ``(..., m)``; their signs name the loaded
       flanks;
-    - ``radius``: lever arms (m), ``(..., m)``.
+    - ``radius``: lever arms (m), ``(..., m)``;
+    - ``weights``: ``(T,)``, positive, summing to one: the averages (mean, RMS, shares)
+      are weighted means over the samples (the windows of a quasi-periodic response,
+      :func:`~gearjax._engine.windowed.window_weights`); ``None``: uniform, exact for a
+      response with the period sampled.
 
     **Returns:** a :class:`MeshResponses` of shape ``(..., m)``. Shares of the period
-    are sample counts over ``T`` (resolution ``1/T``). Pure ``jnp``: ``jit``, ``vmap``
-    and ``grad`` (of the smooth statistics) pass through.
+    are sample counts over ``T`` (resolution ``1/T``; weighted where ``weights`` are
+    given). Pure ``jnp``: ``jit``, ``vmap`` and ``grad`` (of the smooth statistics) pass
+    through.
     """
     b = jnp.asarray(b)[..., None]
     F_static = jnp.asarray(F_static)
-    mean = jnp.mean(F, axis=-1)
-    rms = jnp.sqrt(jnp.mean((F - mean[..., None]) ** 2, axis=-1))
+
+    def average(a):
+        return jnp.mean(a, axis=-1) if weights is None else a @ weights
+
+    mean = average(F)
+    rms = jnp.sqrt(average((F - mean[..., None]) ** 2))
     peak = jnp.max(jnp.abs(F), axis=-1)
     loaded = F_static != 0
     safe_static = jnp.where(loaded, jnp.abs(F_static), 1.0)
     dlf = jnp.where(loaded, peak / safe_static, jnp.nan)
     contact = in_contact(p, b)
-    separation = 1.0 - jnp.mean(contact, axis=-1)
+    separation = 1.0 - average(contact)
     # contact on the flank opposite the static force: p < -b when F_static > 0, p > b when < 0
     side = jnp.sign(F_static)[..., None]
-    back = jnp.mean(contact * (side * p < 0), axis=-1)
+    back = average(contact * (side * p < 0))
     back = jnp.where(loaded, back, jnp.nan)
     return MeshResponses(
         mean_force=mean,

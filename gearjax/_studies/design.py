@@ -63,6 +63,7 @@ above is generic over the basis.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -295,7 +296,8 @@ class DesignSweep:
     ``harmonics`` (K; on a torus the orders per angle, a tuple), ``linear``,
     ``solver``, ``devices`` (how many the designs were spread over); ``torus``: what a
     torus study solves (:func:`~gearjax._gear.case.torus_fields`), ``None`` for a
-    periodic gear (``omega`` is then the base of torus angle 0).
+    periodic gear (``omega`` is then the base of torus angle 0); ``truncation``: the a
+    posteriori check at each design's peak (:func:`peak_truncation`).
     """
 
     paths: tuple[str, ...]
@@ -314,6 +316,7 @@ class DesignSweep:
     solver: str
     devices: int
     torus: dict | None = None
+    truncation: dict | None = None
 
 
 def design_sweep(
@@ -335,16 +338,20 @@ def design_sweep(
     ``1.sun_ring_phase_deg``, ...); ``thetas`` ``(B, p)``: their values per design (file
     units); ``frequencies_hz``: reference-stage mesh frequencies (Hz); ``stage``: the
     reference stage (default: the first turning one); ``linear``: drop the backlash
-    (default: the linear, time-varying model); ``harmonics``: K (default: the highest
-    excitation order, so every stiffness harmonic is resolved; on a torus, ``G > 1``,
-    ``harmonics`` on every angle, default each angle's highest excitation order,
-    :func:`~gearjax._studies.harmonics.orders_floor`); ``solver``: module
-    docstring; ``devices``: shard the designs (module docstring).
+    (default: the linear, time-varying model); ``harmonics``: K on every torus angle,
+    kept, its truncation checked at each design's peak (:func:`peak_truncation`) and
+    warned about (:class:`~gearjax._studies.harmonics.TruncationWarning`) where the
+    estimate exceeds the target; default: the excitation floor
+    (:func:`~gearjax._studies.harmonics.orders_floor`, each angle's highest excitation
+    order), raised per angle and the batch solved again while the check exceeds the
+    target and the next check is affordable, as a sweep raises a segment's K;
+    ``solver``: module docstring; ``devices``: shard the designs (module docstring).
 
     **Returns:** :class:`DesignSweep`. One compilation per batch size, frequency count
-    and K. **Raises:** ``ArgumentError`` (a ``TrainError``) naming the argument for bad
-    ``paths``, ``thetas``, ``frequencies_hz`` or ``solver``; ``TrainError`` for bad
-    harmonics, and as :func:`~gearjax._gear.case.gear_case` for the gear and stage.
+    and K, and one per check. **Raises:** ``ArgumentError`` (a ``TrainError``) naming
+    the argument for bad ``paths``, ``thetas``, ``frequencies_hz`` or ``solver``;
+    ``TrainError`` for bad harmonics, and as :func:`~gearjax._gear.case.gear_case` for
+    the gear and stage.
     """
     case = gear_case(train, gear, stage, linear, torus=True)
     leaves = check_paths(train, paths)
@@ -361,18 +368,118 @@ def design_sweep(
     K = orders_of(nominal, harmonics)
     _harmonics.require_size(nominal, K, mu=case.mu)
     solver = resolve_solver(solver, nominal)
-    settings = _harmonics.settings_for(nominal, K)
     omegas = case.omega(f)
-    rms, code = batched_rms(family, th, omegas, settings, solver=solver, devices=devices)
-    rms, ok, code = np.asarray(rms), np.asarray(code == RESULTS.successful), result_word(code)
-    rms = np.where(ok[..., None], rms, np.nan)
+    while True:
+        rms, code = batched_rms(family, th, omegas, _harmonics.settings_for(nominal, K),
+                                solver=solver, devices=devices)
+        rms, ok = np.asarray(rms), np.asarray(code == RESULTS.successful)
+        rms = np.where(ok[..., None], rms, np.nan)
+        truncation = peak_truncation(family, nominal, th, omegas, rms, K, solver=solver,
+                                     devices=devices)
+        short = short_angles(truncation)
+        if not short or harmonics is not None:
+            break
+        for g in short:  # K chosen here: raise the short angles' orders, as a sweep does
+            K = _harmonics.widened(K, g)
+    warn_truncation(truncation, "design sweep")
+    code = result_word(code)
     n_dev = 1 if devices is None else (devices.size if isinstance(devices, Mesh)
                                        else len(list(devices)))
     return DesignSweep(paths=paths, thetas=th, frequencies_hz=f, omega=np.asarray(omegas),
                        rms_force=rms, result=code, converged=ok, peak=peak_of(rms),
                        meshes=tuple(nominal.mesh_labels), gear=case.gear.name,
                        reference_stage=case.stage, harmonics=K, linear=linear,
-                       solver=solver, devices=n_dev, torus=torus_fields(case))
+                       solver=solver, devices=n_dev, torus=torus_fields(case),
+                       truncation=truncation)
+
+
+def peak_truncation(family, system, thetas, omegas, rms, K, *, solver: str = "linear",
+                    devices: Sequence | Mesh | None = None) -> dict:
+    """The a posteriori truncation check of a batch of designs, as a sweep makes it for a
+    segment: each design solved again at its peak (the frequency of its largest RMS over
+    converged points and meshes) with one angle's order doubled at a time
+    (:func:`~gearjax._studies.harmonics.widened`), from the same start as the batch, and
+    the largest relative change of a mesh's RMS alternating force (a mesh below
+    ``RMS_FLOOR`` of the largest judged against that share, as
+    :func:`~gearjax._studies.harmonics.truncation_change`).
+
+    **Arguments:** ``family``: ``theta -> System``; ``system``: the nominal system (its
+    sizes decide whether a check is affordable,
+    :func:`~gearjax._studies.harmonics.check_affordable`); ``thetas`` ``(B, p)``;
+    ``omegas`` ``(F,)`` or ``(B, F)`` (rad/s) and ``rms`` ``(B, F, m)`` (N, NaN where a
+    point failed): the batch at orders ``K``; ``solver``, ``devices``: as
+    :func:`batched_rms`.
+
+    **Returns:** a dict: ``target`` (``TRUNCATION_TARGET``); ``checks``, per angle:
+    ``K``, ``K_check`` and ``change`` (the largest over the designs; ``None`` where no
+    design's check converged) or ``skipped`` (why not affordable); ``change`` ``(B,)``
+    per design, the largest over the angles checked (NaN where the design has no
+    converged point, a doubled solve of it failed, or no angle could be checked);
+    ``frequency_hz`` ``(B,)``: base frequencies of the peaks (Hz)."""
+    rms = np.asarray(rms, dtype=float)
+    B = rms.shape[0]
+    om = np.broadcast_to(np.asarray(omegas, dtype=float), rms.shape[:2])
+    per_f = np.max(np.where(np.isfinite(rms), rms, -np.inf), axis=-1)
+    has = np.any(np.isfinite(per_f), axis=1)
+    j = np.argmax(per_f, axis=1)
+    om_peak, a = om[np.arange(B), j], rms[np.arange(B), j]
+    change, checked, checks = np.zeros(B), False, []
+    for g in range(system.n_angles):
+        K2 = _harmonics.widened(K, g)
+        pair = {"K": _harmonics.orders_json(K), "K_check": _harmonics.orders_json(K2)}
+        skip = _harmonics.check_affordable(system, K, g)
+        if skip is not None:
+            checks.append({**pair, "change": None, "skipped": skip})
+            continue
+        b, code = batched_rms(family, thetas, om_peak[:, None],
+                              _harmonics.settings_for(system, K2), solver=solver,
+                              devices=devices)
+        b, ok = np.asarray(b)[:, 0], np.asarray(code == RESULTS.successful)[:, 0] & has
+        floor = _harmonics.RMS_FLOOR * np.maximum(np.max(b, axis=1), 1e-300)
+        c = np.where(ok, np.max(np.abs(a - b) / np.maximum(b, floor[:, None]), axis=1), np.nan)
+        change, checked = np.maximum(change, c), True
+        checks.append({**pair, "change": float(np.nanmax(c)) if np.any(ok) else None})
+    return {"target": _harmonics.TRUNCATION_TARGET, "checks": checks,
+            "change": change if checked else np.full(B, np.nan),
+            "frequency_hz": om_peak / (2 * np.pi)}
+
+
+def short_angles(truncation: dict) -> list[int]:
+    """The torus angles (``[0]`` for a periodic gear) whose check in ``truncation``
+    (:func:`peak_truncation`) exceeds the target."""
+    return [g for g, c in enumerate(truncation["checks"])
+            if c["change"] is not None and c["change"] > truncation["target"]]
+
+
+def warn_truncation(truncation: dict, study: str, advice: str | None = None) -> None:
+    """One :class:`~gearjax._studies.harmonics.TruncationWarning` where a check of
+    :func:`peak_truncation` exceeds the target (none otherwise): the largest estimate,
+    at which design's peak (index in the batch, base frequency) and against which
+    orders, in the words of ``study``, with ``advice`` (default: raise ``harmonics`` or
+    let ``study`` choose it)."""
+    change = np.asarray(truncation["change"])
+    if not short_angles(truncation):
+        return
+    b = int(np.nanargmax(change))
+    check = max((c for c in truncation["checks"] if c["change"] is not None),
+                key=lambda c: c["change"])
+    warnings.warn(_harmonics.TruncationWarning(
+        f"{study}: K = {_harmonics.orders_text(check['K'])}: truncation estimate "
+        f"{change[b]:.2%} at design {b}'s peak ({truncation['frequency_hz'][b]:.1f} Hz, "
+        f"base; the largest of {change.size} designs; RMS mesh force change against K = "
+        f"{_harmonics.orders_text(check['K_check'])}; target "
+        f"{truncation['target']:.1%}): "
+        + (advice or f"raise `harmonics`, or omit it to let the {study} choose K")),
+        stacklevel=3)
+
+
+def truncation_json(truncation: dict) -> dict:
+    """:func:`peak_truncation`'s check as JSON values (NaN as ``None``)."""
+    def number(x):
+        return float(x) if np.isfinite(x) else None
+    return {"target": truncation["target"], "checks": truncation["checks"],
+            "change": [number(x) for x in truncation["change"]],
+            "frequency_hz": [float(x) for x in truncation["frequency_hz"]]}
 
 
 def orders_of(system, harmonics: int | None):

@@ -107,6 +107,15 @@ def orders_text(K) -> str:
     return str(K) if isinstance(K, int) else "(" + ", ".join(str(k) for k in K) + ")"
 
 
+def orders_json(K):
+    """``K`` as JSON: an integer, or on a torus the list of orders per angle (``None``
+    stays ``None``)."""
+    if K is None:
+        return None
+    K = as_orders(K)
+    return list(K) if isinstance(K, tuple) else K
+
+
 def settings_for(system: System, K, **fields) -> _hb.HarmonicBalance:
     """The harmonic-balance settings of orders ``K`` on ``system`` (the torus truncation
     set :data:`TORUS_TRUNCATION` where ``K`` is a tuple). Where the solves at ``K`` are

@@ -46,13 +46,13 @@ def checked_orders(case: GearCase, problems: dict, K, y, omega: float, *, fixed:
             K2 = _harmonics.widened(K, g)
             skip = _harmonics.check_affordable(system, K, g)
             if skip is not None:
-                estimates.append({"K": json_orders(K), "K_check": None, "change": None,
+                estimates.append({"K": _harmonics.orders_json(K), "K_check": None, "change": None,
                                   "skipped": skip})
                 continue
             change = _harmonics.truncation_change(problem(K), problem(K2), y, omega,
                                                   jnp.asarray(case.F_static))
             finite = bool(np.isfinite(change))
-            estimates.append({"K": json_orders(K), "K_check": json_orders(K2),
+            estimates.append({"K": _harmonics.orders_json(K), "K_check": _harmonics.orders_json(K2),
                               "change": float(change) if finite else None})
             if finite and change > target:
                 if fixed:
@@ -71,12 +71,7 @@ def checked_orders(case: GearCase, problems: dict, K, y, omega: float, *, fixed:
             wide = _harmonics.widened(wide, g)
         sol = newton(problem(wide), jnp.asarray(omega), resize_harmonics(y, K, problem(wide)))
         if not bool(sol.converged):
-            estimates.append({"K": json_orders(wide), "K_check": None, "change": None,
+            estimates.append({"K": _harmonics.orders_json(wide), "K_check": None, "change": None,
                               "skipped": "the point did not converge with the raised orders"})
             return K, y, estimates
         K, y = wide, sol.y
-
-
-def json_orders(K):
-    """``K`` as JSON: an integer, or on a torus the list of orders per angle."""
-    return list(K) if isinstance(K, tuple) else int(K)

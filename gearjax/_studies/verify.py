@@ -430,7 +430,9 @@ def verify_json(result: VerifyResult) -> dict:
     adds ``reference`` (:func:`window_reference`) and ``torus``
     (:func:`~gearjax._gear.case.torus_fields`), and per point ``harmonics`` as the
     orders per angle, ``period`` null with ``period_reason``, ``windows``, ``window_s``,
-    ``window_change`` and ``agreement`` (:data:`AGREEMENT`) with ``agreement_reason``."""
+    ``window_change`` and ``agreement`` (:data:`AGREEMENT`) with ``agreement_reason``
+    and ``shortfall`` with ``shortfall_reason`` (where the answers differ, which side fell
+    short of its own check and why, :func:`shortfall`; else ``None``)."""
     hb, ni = result.hb, result.ni
     torus = result.reference is not None
     names = hb["mesh"].values.tolist()
@@ -519,6 +521,12 @@ def _torus_point(result: VerifyResult, k: int, conv_hb: bool, res_ni: str) -> di
         word = "integration_failed"
     else:
         word = "agree" if bool(np.all(result.ok[k])) else "differ"
+    side = why = None
+    if word == "differ":
+        checks = json.loads(result.hb.attrs["solver"])["truncation_checks"]
+        side, why = shortfall(checks[k] if k < len(checks) else [],
+                              float(ni["window_change"].values[k]),
+                              result.reference["agreement_tolerance"], result.tolerance)
     return {"harmonics": [int(v) for v in result.hb["harmonics"].values[k]],
             "period": None,
             "period_reason": "quasi-periodic: the mesh frequencies fall in incommensurate "
@@ -527,7 +535,46 @@ def _torus_point(result: VerifyResult, k: int, conv_hb: bool, res_ni: str) -> di
             "windows": int(ni["windows"].values[k]),
             "window_s": _number(ni["window_s"].values[k]),
             "window_change": _number(ni["window_change"].values[k]),
-            "agreement": word, "agreement_reason": AGREEMENT[word]}
+            "agreement": word, "agreement_reason": AGREEMENT[word],
+            "shortfall": side, "shortfall_reason": why if side is not None else None}
+
+
+SHORTFALL = ("harmonic_balance", "integration", "neither")
+"""Which side of a quasi-periodic point that differs fell short of its own check
+(:func:`shortfall`)."""
+
+
+def shortfall(checks: list, window_change: float, window_tol: float,
+              tolerance: float) -> tuple[str, str]:
+    """Which side of a converged quasi-periodic point whose two answers differ by more
+    than ``tolerance`` fell short of its own check, and why, in words: the harmonic
+    balance (its a posteriori truncation checks ``checks``, :func:`checked_orders`: an
+    estimate over ``TRUNCATION_TARGET``, or none made), else the integration (its last
+    two windows, ``window_change``, differ by more than ``tolerance / 4``: the statistics
+    still move by a share of the tolerance; ``window_tol`` is the agreement it was given),
+    else ``"neither"``: each side meets its own check, so the difference is the
+    response's (the torus is not what the integration follows).
+
+    **Returns:** ``(side, words)``, ``side`` one of :data:`SHORTFALL`."""
+    target = _harmonics.TRUNCATION_TARGET
+    made = [c["change"] for c in checks if c.get("change") is not None]
+    if not made:
+        return "harmonic_balance", ("the harmonic balance's truncation was not checked at "
+                                    "this point (" + "; ".join(
+                                        c.get("skipped", "no check") for c in checks)
+                                    + "): it may be short")
+    if max(made) > target:
+        return "harmonic_balance", (f"the harmonic balance fell short: its truncation "
+                                    f"estimate {max(made):.2%} exceeds the {target:.1%} "
+                                    "target (omit `--harmonics`, or raise it)")
+    if np.isfinite(window_change) and window_change > tolerance / 4:
+        return "integration", (f"the integration fell short: its last two windows differ by "
+                               f"{window_change:.2%}, a share of the {tolerance:.0%} "
+                               f"tolerance (agreement asked: {window_tol:g}; lower "
+                               "Windowed.tol)")
+    return "neither", (f"each side meets its own check (truncation estimate "
+                       f"{max(made):.2%}, windows within {window_change:.2%}): the "
+                       "difference is the response's")
 
 
 def _number(x) -> float | None:

@@ -69,9 +69,10 @@ def test_batched_equals_looped_and_compiles_once(paper, batched):
         one = D.design_sweep(paper, "first", PATHS, THETAS[b:b + 1], FREQS, harmonics=K)
         rel = np.abs(one.rms_force[0] - batched.rms_force[b]) / batched.rms_force[b]
         assert rel.max() <= 1e-12
-    assert D._design_jit._cached._cache_size() == n_compiled + 1  # batch of 1: one more
+    # a batch of 1: one more program, and one for its truncation check at the peaks
+    assert D._design_jit._cached._cache_size() == n_compiled + 2
     again = D.design_sweep(paper, "first", PATHS, THETAS[::-1] + 3.6, FREQS, harmonics=K)
-    assert D._design_jit._cached._cache_size() == n_compiled + 1  # same shapes: no compile
+    assert D._design_jit._cached._cache_size() == n_compiled + 2  # same shapes: no compile
     assert not np.allclose(again.rms_force[::-1], batched.rms_force)
 
 
@@ -351,11 +352,19 @@ def test_cli_optimize_writes_a_train_every_command_loads(capsys, small, tmp_path
     out_train, out = tmp_path / "opt.toml", tmp_path / "opt.nc"
     code = _cli.main(["optimize", str(small), *TINY, "--out-train", str(out_train),
                       "--out", str(out), "--json"])
-    text, _ = capsys.readouterr()
+    text, err = capsys.readouterr()
     assert code == 0
     data = json.loads(text)
     for key in ("baseline", "optimum", "improvement", "relaxation", "stages", "candidates"):
         assert key in data
+    # the linear screen's K checked at the baseline's, optimum's and relaxation's peaks
+    check = data["models"]["final"]["truncation"]
+    assert [(c["K"], c["K_check"]) for c in check["checks"]] == [(4, 8)]
+    assert len(check["change"]) == 3 and check["checks"][0]["change"] == max(check["change"])
+    assert ("optimize: truncation check at each design's linear peak, K = 4: against 8: "
+            f"{max(check['change']):.2%} (target 0.5%)") in err
+    assert ("warning: optimize: K = 4: truncation estimate" in err) == (
+        max(check["change"]) > check["target"])
     assert data["optimum"]["linear_peak"] < data["baseline"]["linear_peak"]
     assert data["optimum"]["admissible"] and data["relaxation"]["assemblable"] is False
     loaded = gj.load_train(out_train)

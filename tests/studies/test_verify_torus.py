@@ -25,6 +25,7 @@ from gearjax._cli import main
 from gearjax._engine import time_domain as td
 from gearjax._gear.case import gear_case
 from gearjax._io.verify_file import load_verify
+from gearjax._studies import harmonics as _harmonics
 from gearjax._studies import simulate as _simulate
 from gearjax._studies import verify as _verify
 
@@ -91,7 +92,7 @@ def test_a_window_longer_than_allowed_is_refused(train, monkeypatch, capsys):
     before any work, in one line from the command."""
     short = gj.Windowed(max_window_periods=100)
     msg = (r"gears\.first = \['1', '81/70'\]: the frequency groups' angle ratios ask for "
-           r"too long a window: .* needs 637 base periods, more than "
+           r"too long a window: .* needs 128 base periods, more than "
            r"Windowed\.max_window_periods = 100")
     with pytest.raises(gj.TrainError, match=msg):
         gj.simulate_gear(train, "first", [10500.0], windowed=short)
@@ -101,7 +102,7 @@ def test_a_window_longer_than_allowed_is_refused(train, monkeypatch, capsys):
     for command in ("simulate", "verify"):
         assert main([command, str(TRAIN), "--at", "10500"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert err[-1].startswith("gearjax: error: ") and "637 base periods" in err[-1]
+        assert err[-1].startswith("gearjax: error: ") and "128 base periods" in err[-1]
         assert "Traceback" not in "\n".join(err)
 
 
@@ -148,6 +149,23 @@ def test_a_torus_that_the_integration_does_not_follow_is_never_a_pass(verified):
     assert not out["all_ok"] and out["reference"] == r.reference
     assert differ["agreement"] == "differ" and not differ["ok"] and differ["converged"]
     assert "locks onto a rational winding" in differ["agreement_reason"]
+    # which side fell short: each met its own check here, so neither (the 5% is put in)
+    estimate = max(c["change"] for c in differ["truncation"] if c["change"] is not None)
+    assert estimate <= _harmonics.TRUNCATION_TARGET
+    assert differ["shortfall"] == "neither" and differ["shortfall_reason"] == (
+        f"each side meets its own check (truncation estimate {estimate:.2%}, windows within "
+        f"{differ['window_change']:.2%}): the difference is the response's")
+    assert unsettled["shortfall"] is None
+    assert _verify.shortfall([{"K": [8, 8], "K_check": [16, 8], "change": 0.03}], 1e-4, 1e-3,
+                             0.01) == ("harmonic_balance", "the harmonic balance fell short: "
+                                       "its truncation estimate 3.00% exceeds the 0.5% target "
+                                       "(omit `--harmonics`, or raise it)")
+    assert _verify.shortfall([{"K": [8, 8], "K_check": [16, 8], "change": 1e-4}], 0.004, 0.04,
+                             0.01)[0] == "integration"
+    assert _verify.shortfall([{"K": [8, 8], "K_check": None, "change": None,
+                               "skipped": "too big"}], 1e-4, 1e-3, 0.01) == (
+        "harmonic_balance", "the harmonic balance's truncation was not checked at this point "
+                            "(too big): it may be short")
     assert unsettled["agreement"] == "not_stationary" and not unsettled["ok"]
     assert not unsettled["converged"] and unsettled["result"] == "not_stationary"
     assert all(m["rel_diff"] is None and m["reason"] == "integration not_stationary"
@@ -219,7 +237,7 @@ def test_simulate_command_json(monkeypatch, capsys, tmp_path, simulated):
     # the table says what the statistics are
     assert main(["simulate", str(TRAIN), "--at", "10500"]) == 0
     text = capsys.readouterr().out
-    assert "quasi_periodic" in text and "windows of 160 base periods" in text
+    assert "quasi_periodic" in text and "windows of 128 base periods" in text
 
 
 def test_verify_command_json(monkeypatch, capsys, tmp_path, verified):
@@ -250,9 +268,11 @@ def test_verify_command_json(monkeypatch, capsys, tmp_path, verified):
 
 @pytest.mark.slow
 def test_verify_command_default_windows_linear(capsys):
-    """The command's own windows (100 beats: 637 base periods, two agreements)."""
+    """The command's own windows (20 beats: 128 base periods, two agreements within
+    1e-3)."""
     code = main(["verify", str(TRAIN), "--at", "10500", "--linear", "--json"])
     out = json.loads(capsys.readouterr().out)
     assert code == 0 and out["all_ok"] and out["tolerance"] == 0.01
-    assert out["reference"]["window_periods"] == 637 and out["reference"]["n_agree"] == 2
+    assert out["reference"]["window_periods"] == 128 and out["reference"]["n_agree"] == 2
+    assert out["reference"]["n_beats"] == 20 and out["reference"]["agreement_tolerance"] == 1e-3
     assert out["points"][0]["windows"] >= 4 and out["max_rel_diff"] < 0.01

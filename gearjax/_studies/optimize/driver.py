@@ -41,7 +41,7 @@ from ..._gear.planet_sets import (
 )
 from ..._gear.train import Train
 from .. import harmonics as _harmonics
-from ..design import orders_of, peak_of
+from ..design import orders_of, peak_of, peak_truncation, truncation_json, warn_truncation
 from ..sweep.default_band import default_band
 from .nonlinear import NONLINEAR_RTOL, BandSettings, NonlinearBand, nonlinear_band
 from .proxy import proxy_screen
@@ -182,6 +182,16 @@ def optimize(
     final_rms = screen.rms(np.asarray(finals), np.broadcast_to(f_final, (len(finals),
                                                                           f_final.size)),
                            batch=len(finals))
+    truncation = peak_truncation(screen.family, nominal, np.asarray(finals),
+                                 case.omega(f_final), final_rms, K, devices=settings.devices)
+    models["final"]["truncation"] = truncation_json(truncation)
+    say("optimize: truncation check at each design's linear peak, K = "
+        f"{_harmonics.orders_text(K)}: " + "; ".join(
+            f"against {_harmonics.orders_text(c['K_check'])}: "
+            + (f"{c['change']:.2%}" if c["change"] is not None else c.get("skipped", "failed"))
+            for c in truncation["checks"]) + f" (target {truncation['target']:.1%})")
+    warn_truncation(truncation, "optimize", "the linear screen ranked its candidates at this "
+                    "K: give a larger `harmonics`")
     baseline = _design(study, variables, train, final_rms[0], base_nl)
     optimum = _design(study, variables, current, final_rms[1], cur_nl)
     if relaxation is not None:

@@ -14,6 +14,7 @@ from ..._gear.planet_sets import planet_imbalance
 from ..._gear.toml_io import dumps_train
 from ..._io.results import netcdf_attr
 from ..._version import __version__
+from .. import harmonics as _harmonics
 from .result import Design, OptimizeResult
 from .settings import settings_dict
 
@@ -86,18 +87,13 @@ def optimize_json(result: OptimizeResult) -> dict:
         "candidates": rows,
         "settings": settings_dict(result.settings),
         "seconds": result.seconds,
-        "harmonics": _orders_json(result.harmonics),
+        "harmonics": _harmonics.orders_json(result.harmonics),
         "torus": result.torus,
     }
 
 
 OBJECTIVE = ("largest RMS alternating mesh force over the band and every mesh (N); with "
              "backlash over every stable state of a complete sweep")
-
-
-def _orders_json(K):
-    """K as JSON: an int, or on a torus the list of orders per angle."""
-    return list(K) if isinstance(K, tuple) else K
 
 
 def optimize_frame(result: OptimizeResult):
@@ -241,7 +237,7 @@ def optimize_dataset(result: OptimizeResult, attrs: dict | None = None):
         "relaxed_values": {} if r is None else r.values,
         "stages": result.stages,
         "settings": settings_dict(result.settings),
-        "harmonics": _orders_json(result.harmonics),
+        "harmonics": _harmonics.orders_json(result.harmonics),
         "torus": result.torus,
         "train_toml": dumps_train(result.train),
         "baseline_train_toml": dumps_train(result.baseline_train),
