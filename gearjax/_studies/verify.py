@@ -524,7 +524,9 @@ def _torus_point(result: VerifyResult, k: int, conv_hb: bool, res_ni: str) -> di
     side = why = None
     if word == "differ":
         checks = json.loads(result.hb.attrs["solver"])["truncation_checks"]
-        side, why = shortfall(checks[k] if k < len(checks) else [],
+        K = [int(v) for v in result.hb["harmonics"].values[k]]
+        side, why = shortfall([c for c in (checks[k] if k < len(checks) else [])
+                               if c["K"] == K],
                               float(ni["window_change"].values[k]),
                               result.reference["agreement_tolerance"], result.tolerance)
     return {"harmonics": [int(v) for v in result.hb["harmonics"].values[k]],
@@ -548,8 +550,9 @@ def shortfall(checks: list, window_change: float, window_tol: float,
               tolerance: float) -> tuple[str, str]:
     """Which side of a converged quasi-periodic point whose two answers differ by more
     than ``tolerance`` fell short of its own check, and why, in words: the harmonic
-    balance (its a posteriori truncation checks ``checks``, :func:`checked_orders`: an
-    estimate over ``TRUNCATION_TARGET``, or none made), else the integration (its last
+    balance (its a posteriori truncation checks at the orders it kept, ``checks``,
+    :func:`checked_orders`: an estimate over ``TRUNCATION_TARGET``, or an angle not
+    checked), else the integration (its last
     two windows, ``window_change``, differ by more than ``tolerance / 4``: the statistics
     still move by a share of the tolerance; ``window_tol`` is the agreement it was given),
     else ``"neither"``: each side meets its own check, so the difference is the
@@ -558,15 +561,16 @@ def shortfall(checks: list, window_change: float, window_tol: float,
     **Returns:** ``(side, words)``, ``side`` one of :data:`SHORTFALL`."""
     target = _harmonics.TRUNCATION_TARGET
     made = [c["change"] for c in checks if c.get("change") is not None]
-    if not made:
-        return "harmonic_balance", ("the harmonic balance's truncation was not checked at "
-                                    "this point (" + "; ".join(
-                                        c.get("skipped", "no check") for c in checks)
-                                    + "): it may be short")
-    if max(made) > target:
+    if made and max(made) > target:
         return "harmonic_balance", (f"the harmonic balance fell short: its truncation "
                                     f"estimate {max(made):.2%} exceeds the {target:.1%} "
                                     "target (omit `--harmonics`, or raise it)")
+    unchecked = [c for c in checks if c.get("change") is None] if checks else [{}]
+    if unchecked:
+        return "harmonic_balance", ("the harmonic balance's truncation was not checked at "
+                                    "this point (" + "; ".join(
+                                        c.get("skipped", "no check") for c in unchecked)
+                                    + "): it may be short")
     if np.isfinite(window_change) and window_change > tolerance / 4:
         return "integration", (f"the integration fell short: its last two windows differ by "
                                f"{window_change:.2%}, a share of the {tolerance:.0%} "
