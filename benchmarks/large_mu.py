@@ -1,5 +1,5 @@
 """A periodic train with large mu: the torus balance against the periodic balance at
-K = H max(mu) and against the periodic time integration (issue 28, item 8).
+K = H max(mu) and against the periodic time integration.
 
 The paper's topology with stage 2 teeth 43/19/81: stage mesh frequencies in the ratio
 81/70, so one common base needs mu = (70, 81) and a periodic balance that holds the 4

@@ -1,5 +1,5 @@
 """Newton at a fixed frequency with the condensed LU and with matrix-free BiCGStab
-(``HarmonicBalance.linear_solver``), against the number of unknowns (issue 46).
+(``HarmonicBalance.linear_solver``), against the number of unknowns.
 
 For each size: one Newton solve of the harmonic balance from the linear, in-contact
 guess (``solve_hb``) with each linear solver, compiled first (compile time apart), then

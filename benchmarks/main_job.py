@@ -1,4 +1,4 @@
-"""The README's main job from the command line, cold and warm (issue 30's targets): wall
+"""The README's main job from the command line, cold and warm: wall
 time of whole ``gearjax`` processes, interpreter start included.
 
 Four runs of the same command, in turn:

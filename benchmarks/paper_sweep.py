@@ -19,9 +19,9 @@ and the time after compile in units of it.
 
 Writes ``paper_linear.nc``/``.png`` and ``paper_backlash.nc``/``.png`` to ``--out-dir``.
 ``--no-complete``: the backlash sweep without the completion (``complete=False``: the
-walk alone, the sweep before issue 29).
+walk alone).
 
-``--compare-completion`` (issue 29, item 5): the backlash sweep with the completion (the
+``--compare-completion``: the backlash sweep with the completion (the
 default; ``--seeds``: its integration seeds) against the walk alone, each run once to
 compile and then ``--rounds`` times interleaved (walk, completed, walk, completed, ...)
 in this process; prints the times after compilation with their ratio, the points and

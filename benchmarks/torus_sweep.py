@@ -1,5 +1,5 @@
 """Sweeps of trains whose stage mesh frequencies share no small common base: the
-multi-frequency (torus) harmonic balance (issue 28's benchmarks).
+multi-frequency (torus) harmonic balance.
 
 ``--case g2`` (default): the paper's topology with stage 2 re-toothed 43/19/81
 (tests/data/two_stage_43_19_81.toml; mesh frequencies 70 : 81, two frequency groups),

@@ -1,4 +1,4 @@
-"""Refuse, don't guess (issue 26): every refusal of the command line is one line on
+"""Refuse, don't guess: every refusal of the command line is one line on
 stderr and an exit code, never a usage dump or a traceback; output paths are checked
 before any work; results are written atomically; a journal being written by a live
 run is locked, and the lock dies with its process."""

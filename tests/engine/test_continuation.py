@@ -40,7 +40,7 @@ def branch():
 def test_reaches_the_end_through_both_folds(branch):
     assert bool(branch["code"] == RESULTS.reached_end)
     assert branch["lam"][-1] >= 1.5
-    # pyHarm and NLvib put the folds near 0.852 and 0.6365 (issue 3)
+    # pyHarm and NLvib put the folds near 0.852 and 0.6365
     folds = np.sort(branch["folds"])
     assert len(folds) == 2
     np.testing.assert_allclose(folds, [0.6365, 0.852], atol=2e-3)

@@ -1,6 +1,6 @@
 """The stated discretisation rules: time samples (AFT) and solution harmonics (sweeps).
 
-Issue 3 fixes what they must achieve: RMS forces and fold frequencies change by
+What they must achieve: RMS forces and fold frequencies change by
 < 0.1% when the sample count doubles; RMS mesh forces change by < 0.5% when the
 harmonics double. Each is checked here where it is hardest: with tooth separation
 (samples) and at the low end of the paper's band (harmonics).

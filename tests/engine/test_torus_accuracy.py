@@ -1,15 +1,15 @@
 """Accuracy of the torus harmonic balance and of its stability verdict, against results
-that do not come from the balance (issue 28, items 2, 5 and 8).
+that do not come from the balance:
 
-- item 2: a linear system with two incommensurate parametric excitations, the RMS mesh
+- a linear system with two incommensurate parametric excitations, the RMS mesh
   forces of the torus balance against a long windowed time integration;
-- item 5: the growth per turn of the Floquet verdict on a torus (the monodromy over the
+- the growth per turn of the Floquet verdict on a torus (the monodromy over the
   near return, :func:`gearjax._engine.floquet.return_turns`) against Hill's method on
   the torus basis and against the time integration from the solution: a point marked
   stable is one the integration stays on, one marked unstable one it leaves, and the
   integration's own growth or decay rate is the verdict's; and what the drift bound
   :data:`gearjax._engine.floquet.RETURN_DRIFT` costs;
-- item 8: a torus whose ratio is rational (9/7), restricted to the line ``theta = rates
+- a torus whose ratio is rational (9/7), restricted to the line ``theta = rates
   Omega t``, against the periodic balance of the same system on the common base
   ``Omega / 7`` (mu = (7, 9)) and against the periodic time integration.
 
@@ -129,7 +129,7 @@ def per_turn_max(a, per_turn):
     return a[:-1].reshape(-1, per_turn).max(axis=1)
 
 
-# ------------------------------------------------------------------------ item 2
+# ---------------------------------------------- two incommensurate parametric excitations
 
 
 @pytest.mark.slow
@@ -193,7 +193,7 @@ def test_two_parametric_excitations_match_windowed_integration():
         np.testing.assert_allclose(r.mean_force, mean_w, rtol=1e-4)
 
 
-# ------------------------------------------------------------------------ item 5
+# ------------------------------------------------------------- the verdict's growth per turn
 
 # Per-turn growth of the Floquet verdict against Hill's: the monodromy is taken over the
 # q = 29 turns after which the line theta = (1, sqrt 2) omega t returns within d = 0.012
@@ -360,7 +360,7 @@ def test_drift_of_the_near_return():
         assert abs(coarse[-1] - small[-1]) < GROWTH_TOL
 
 
-# ------------------------------------------------------------------------ item 8
+# ------------------------------------------------------------------- a rational torus (9/7)
 
 
 def periodic_twin(system, mu):

@@ -1,4 +1,4 @@
-"""The paper's first gear with 0.05 mm backlash over 7.0-7.4 kHz (issue 29, item 1): an
+"""The paper's first gear with 0.05 mm backlash over 7.0-7.4 kHz: an
 up and a down time integration sweep (each point continued from the one before, 100 Hz
 steps) settle to different stable states at 7.1-7.3 kHz; the completed sweep's stable
 branches hold every state they settle to, within 2% in each mesh's RMS force.

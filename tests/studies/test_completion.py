@@ -1,4 +1,4 @@
-"""A completed sweep (issue 29, item 1): every stable state an up or down rig finds.
+"""A completed sweep: every stable state an up or down rig finds.
 
 The clearance oscillator ``x'' + 0.1 x' + g(x) = 0.1 + 0.03 cos(w t)`` (gap 1) has a
 hysteresis band between folds near 0.6365 and 0.852 rad/s: a low contact state (linear,

@@ -1,5 +1,5 @@
 """The band of a sweep asked for without one: from the gear's modes and excitation
-orders (issue 51), on trains other than the paper's."""
+orders, on trains other than the paper's."""
 
 from pathlib import Path
 

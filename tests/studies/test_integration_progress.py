@@ -1,4 +1,4 @@
-"""An integration's progress (issue 51, item 1): the lines ``simulate`` and ``verify``
+"""An integration's progress: the lines ``simulate`` and ``verify``
 write as points end (one at a time on a CPU) and, for a quasi-periodic gear, as its
 windows run, from the engine's window reports."""
 

@@ -1,4 +1,4 @@
-"""The words of a linear sweep (issue 51, items 3 and 4), on a five-planet helicopter main
+"""The words of a linear sweep, on a five-planet helicopter main
 stage (tests/data/helicopter_five_planets.toml): a multiplier outside the unit circle is
 a parametric instability (unbounded), never a bifurcation of the backlash model; the
 largest force is taken over stable points inside the band; a result whose alternating

@@ -1,5 +1,5 @@
 """The phasing optimiser's objective with backlash is the peak over every stable state of a
-complete sweep (issue 29, item 4), and its output says plainly whether the optimum beats
+complete sweep, and its output says plainly whether the optimum beats
 the baseline.
 
 The case: a three-planet single stage (tests/data/three_planets.toml with 1% mesh damping) over

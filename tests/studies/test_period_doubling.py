@@ -1,4 +1,4 @@
-"""Branch switching at a period doubling (issue 29, item 2).
+"""Branch switching at a period doubling.
 
 The parametrically excited clearance oscillator ``x'' + 0.05 x' + (1 + 0.4 cos(w t))
 g(x) = 0.1`` (gap 1, so ``x = 1 + u`` in contact): its period-one orbit stays in contact,

@@ -1,4 +1,4 @@
-"""A linear sweep's refinement is bounded, shown and resumable (issue 51, item 1), on a
+"""A linear sweep's refinement is bounded, shown and resumable, on a
 five-planet helicopter main stage (tests/data/helicopter_five_planets.toml), not the
 paper's train: ``max_points`` caps the points solved (grid and middles), a refinement
 stopped with lines still suspect says so (a warning, ``solver.refinement``), each

@@ -1,5 +1,4 @@
-"""Sensitivities, batched designs and the phasing optimiser on a quasi-periodic train
-(issue 28, item 7).
+"""Sensitivities, batched designs and the phasing optimiser on a quasi-periodic train.
 
 The train is tests/data/two_stage_14_17.toml (mesh frequencies 14 : 17: two
 incommensurate frequency groups, one torus angle per stage) with one stiffness harmonic

@@ -1,4 +1,4 @@
-"""A sweep on a torus (issue 28, item 3): continuation in the base frequency of a response
+"""A sweep on a torus: continuation in the base frequency of a response
 driven at two incommensurate frequencies, through folds, with its stability.
 
 The clearance oscillator ``x'' + 0.1 x' + g(x) = 0.1 + 0.03 cos(w t) + 0.01 cos(sqrt(2) w

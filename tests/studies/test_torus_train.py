@@ -1,4 +1,4 @@
-"""A two-group train end to end (issue 28, item 3): ``gearjax sweep`` on the paper's
+"""A two-group train end to end: ``gearjax sweep`` on the paper's
 topology with stage 2 re-toothed 45/20/85 (tests/data/two_stage_14_17.toml: mesh
 frequencies 14 : 17, two incommensurate groups) solves the torus balance, says which
 frequencies and truncation it used, keeps the mean transmitted torque, and resumes from
