@@ -186,20 +186,17 @@ class WindowPlan(eqx.Module):
 
 def _bump(s):
     """The weight ``exp(-1 / (s (1 - s)))`` on ``0 < s < 1``, zero at and beyond the
-    ends (numpy)."""
-    s = np.asarray(s, dtype=float)
+    ends (``jnp``: traced inside a program, no constant array)."""
     inside = (s > 0) & (s < 1)
-    out = np.zeros_like(s)
-    out[inside] = np.exp(-1.0 / (s[inside] * (1.0 - s[inside])))
-    return out
+    return jnp.where(inside, jnp.exp(-1.0 / jnp.where(inside, s * (1.0 - s), 1.0)), 0.0)
 
 
-def window_weights(samples: int) -> np.ndarray:
+def window_weights(samples: int) -> Array:
     """The weights ``(samples,)`` of a quasi-periodic window's averages: the smooth bump
     ``exp(-1 / (s (1 - s)))`` at the sample instants ``s = j / samples`` of the window,
     normalised to sum to one (module docstring, "Weighted averages")."""
-    w = _bump(np.arange(samples) / samples)
-    return w / w.sum()
+    w = _bump(jnp.arange(samples) / samples)
+    return w / jnp.sum(w)
 
 
 _LEAK_NODES = 4096
@@ -213,7 +210,7 @@ def window_leak(cycles: float) -> float:
     over a window leaves of a unit tone that runs ``c`` cycles in it (a uniform window
     leaves up to ``1 / (pi c)``)."""
     s = (np.arange(_LEAK_NODES) + 0.5) / _LEAK_NODES
-    w = _bump(s)
+    w = np.exp(-1.0 / (s * (1.0 - s)))
     w /= w.sum()
     c = np.linspace(cycles, 2 * cycles, 257)
     return float(np.max(np.abs(np.exp(2j * np.pi * np.outer(c, s)) @ w)))
@@ -316,7 +313,7 @@ def _windows(problem: IntegrationProblem, plan: WindowPlan, F_static, omega, x0,
     span = 2 * jnp.pi * plan.periods  # a window in tau
     T = plan.periods * plan.samples
     frac = jnp.arange(T) / T
-    weights = None if plan.slowest is None else jnp.asarray(window_weights(T))
+    weights = None if plan.slowest is None else window_weights(T)
     term = dfx.ODETerm(vector_field)
     controller = settings.controller()
 

@@ -238,7 +238,7 @@ def test_simulate_command_json(monkeypatch, capsys, tmp_path, simulated):
     # the table says what the statistics are
     assert main(["simulate", str(TRAIN), "--at", "10500"]) == 0
     text = capsys.readouterr().out
-    assert "quasi_periodic" in text and "windows of 128 base periods" in text
+    assert "quasi_periodic" in text and "windows of 160 base periods" in text
 
 
 def test_verify_command_json(monkeypatch, capsys, tmp_path, verified):
