@@ -32,6 +32,7 @@ def checked_orders(case: GearCase, problems: dict, K, y, omega: float, *, fixed:
     a dict ``K``, ``K_check``, ``change`` (``None`` where not checked: ``skipped`` says
     why, or the doubled solve did not converge)."""
     system, target = case.system, _harmonics.TRUNCATION_TARGET
+    orders = _harmonics.orders_json
 
     def problem(k):
         if k not in problems:
@@ -46,13 +47,13 @@ def checked_orders(case: GearCase, problems: dict, K, y, omega: float, *, fixed:
             K2 = _harmonics.widened(K, g)
             skip = _harmonics.check_affordable(system, K, g)
             if skip is not None:
-                estimates.append({"K": _harmonics.orders_json(K), "K_check": None, "change": None,
+                estimates.append({"K": orders(K), "K_check": None, "change": None,
                                   "skipped": skip})
                 continue
             change = _harmonics.truncation_change(problem(K), problem(K2), y, omega,
                                                   jnp.asarray(case.F_static))
             finite = bool(np.isfinite(change))
-            estimates.append({"K": _harmonics.orders_json(K), "K_check": _harmonics.orders_json(K2),
+            estimates.append({"K": orders(K), "K_check": orders(K2),
                               "change": float(change) if finite else None})
             if finite and change > target:
                 if fixed:
@@ -71,7 +72,7 @@ def checked_orders(case: GearCase, problems: dict, K, y, omega: float, *, fixed:
             wide = _harmonics.widened(wide, g)
         sol = newton(problem(wide), jnp.asarray(omega), resize_harmonics(y, K, problem(wide)))
         if not bool(sol.converged):
-            estimates.append({"K": _harmonics.orders_json(wide), "K_check": None, "change": None,
+            estimates.append({"K": orders(wide), "K_check": None, "change": None,
                               "skipped": "the point did not converge with the raised orders"})
             return K, y, estimates
         K, y = wide, sol.y

@@ -4,6 +4,7 @@ target; a K given by the user is kept and warned about. On the five-planet helic
 stage (not the paper's train), whose floor K = 2 (two stiffness harmonics) misses its
 peaks by tens of percent."""
 
+import pathlib
 import warnings
 
 import numpy as np
@@ -12,7 +13,7 @@ import pytest
 import gearjax as gj
 from gearjax._studies import harmonics as H
 
-TRAIN = "tests/data/helicopter_five_planets.toml"
+TRAIN = pathlib.Path(__file__).parents[1] / "data" / "helicopter_five_planets.toml"
 PATHS = ["main.planet_angles_deg.2"]
 THETAS = [[72.0], [75.0]]
 FREQS = [1500.0, 2500.0, 3500.0]
