@@ -917,7 +917,7 @@ def _stderr(message: str) -> None:
 
 
 def _simulate_cmd(args, train, notes) -> int:
-    from ._io.results import points_json, save_results
+    from ._io.results import json_number, points_json, save_results
     from ._studies.simulate import simulate_gear
 
     g = train.gear(args.gear)
@@ -945,8 +945,8 @@ def _simulate_cmd(args, train, notes) -> int:
     if windowed:
         for k, p in enumerate(out["points"]):
             p["windows"] = int(ds["windows"].values[k])
-            p["window_s"] = _finite(ds["window_s"].values[k])
-            p["window_change"] = _finite(ds["window_change"].values[k])
+            p["window_s"] = json_number(ds["window_s"].values[k])
+            p["window_change"] = json_number(ds["window_change"].values[k])
             p["period_reason"] = ("quasi-periodic: the mesh frequencies fall in "
                                   "incommensurate groups, so the response never repeats; "
                                   "statistics of the last of the windows")
@@ -978,11 +978,6 @@ def _simulate_cmd(args, train, notes) -> int:
     if args.plot:
         print(f"figure written to {args.plot}")
     return code
-
-
-def _finite(x) -> float | None:
-    x = float(x)
-    return x if math.isfinite(x) else None
 
 
 def _verify_cmd(args, train, notes) -> int:

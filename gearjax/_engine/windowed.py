@@ -61,6 +61,7 @@ The window loop is a ``lax.while_loop``: jit-able and vmappable over ``Omega``.
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 from collections.abc import Callable
 
@@ -184,11 +185,12 @@ class WindowPlan(eqx.Module):
     leak: float = eqx.field(static=True, default=0.0)
 
 
-def _bump(s):
+def _bump(s, xp=jnp):
     """The weight ``exp(-1 / (s (1 - s)))`` on ``0 < s < 1``, zero at and beyond the
-    ends (``jnp``: traced inside a program, no constant array)."""
+    ends, in the array namespace ``xp`` (``jnp``: traced inside a program, no constant
+    array; ``np``: on the host)."""
     inside = (s > 0) & (s < 1)
-    return jnp.where(inside, jnp.exp(-1.0 / jnp.where(inside, s * (1.0 - s), 1.0)), 0.0)
+    return xp.where(inside, xp.exp(-1.0 / xp.where(inside, s * (1.0 - s), 1.0)), 0.0)
 
 
 def window_weights(samples: int) -> Array:
@@ -204,13 +206,15 @@ _LEAK_NODES = 4096
 derivatives at the ends: the rule converges faster than any power)."""
 
 
+@functools.lru_cache(maxsize=64)
 def window_leak(cycles: float) -> float:
     """The largest ``|integral w(s) exp(2 pi i c s) ds|`` over ``cycles <= c <= 2
     cycles``, ``w`` the normalised bump of :func:`window_weights`: what the weighted mean
     over a window leaves of a unit tone that runs ``c`` cycles in it (a uniform window
-    leaves up to ``1 / (pi c)``)."""
+    leaves up to ``1 / (pi c)``). Kept per ``cycles`` (a plan is made for every
+    integration call)."""
     s = (np.arange(_LEAK_NODES) + 0.5) / _LEAK_NODES
-    w = np.exp(-1.0 / (s * (1.0 - s)))
+    w = _bump(s, np)
     w /= w.sum()
     c = np.linspace(cycles, 2 * cycles, 257)
     return float(np.max(np.abs(np.exp(2j * np.pi * np.outer(c, s)) @ w)))

@@ -473,7 +473,7 @@ def points_json(ds: xr.Dataset) -> list[dict]:
             mesh = {"name": str(name), "stage": str(stage[j]), "side": str(side[j]),
                     "planet": int(planet[j])}
             for field in RESPONSE_FIELDS:
-                mesh[field] = _number(values[field][k, j])
+                mesh[field] = json_number(values[field][k, j])
             if any(mesh[field] is None for field in RESPONSE_FIELDS):
                 if not converged:
                     mesh["reason"] = f"point not converged ({result})"
@@ -483,14 +483,14 @@ def points_json(ds: xr.Dataset) -> list[dict]:
                     mesh["reason"] = "not finite"
             meshes.append(mesh)
         points.append({
-            "mesh_frequency_hz": _number(ds["mesh_frequency_hz"].values[k]),
-            "stage_mesh_frequency_hz": [_number(v)
+            "mesh_frequency_hz": json_number(ds["mesh_frequency_hz"].values[k]),
+            "stage_mesh_frequency_hz": [json_number(v)
                                         for v in ds["stage_mesh_frequency_hz"].values[k]],
-            "input_rpm": _number(ds["input_rpm"].values[k]),
+            "input_rpm": json_number(ds["input_rpm"].values[k]),
             "result": result,
             "converged": converged,
             "stable": _stable_json(ds["stable"].values[k]) if "stable" in ds else None,
-            "period": _number(ds["period"].values[k]) if "period" in ds else None,
+            "period": json_number(ds["period"].values[k]) if "period" in ds else None,
             "meshes": meshes,
         })
         if "branch" in ds:  # a sweep: the solution branch, and how it was found
@@ -498,7 +498,7 @@ def points_json(ds: xr.Dataset) -> list[dict]:
             if "found" in ds:
                 points[-1]["found"] = str(ds["found"].values[k])
         if "max_multiplier" in ds:  # a harmonic-balance sweep: its stability's measure
-            points[-1]["max_multiplier"] = _number(ds["max_multiplier"].values[k])
+            points[-1]["max_multiplier"] = json_number(ds["max_multiplier"].values[k])
         if "period" in ds and not ds["period"].values[k] > 0:  # 0: no repeat found
             points[-1]["period"] = None
             points[-1]["period_reason"] = ("the orbit did not repeat within the integrated "
@@ -547,7 +547,9 @@ def _stable_json(code) -> bool | None:
     return bool(code > 0)
 
 
-def _number(x) -> float | None:
+def json_number(x) -> float | None:
+    """``x`` as a JSON number: a ``float``, or ``None`` where it is not finite (NaN marks a
+    missing value in the results, and JSON has no NaN)."""
     x = float(x)
     return x if math.isfinite(x) else None
 

@@ -81,6 +81,7 @@ from .._engine.newton import solve_hb
 from .._engine.responses import mesh_responses, static_mesh_forces
 from .._errors import bad_argument
 from .._gear.case import gear_case, torus_fields
+from .._io.results import json_number
 from .._gear.train import Train
 from . import harmonics as _harmonics
 from .sensitivity import GearFamily, check_paths
@@ -399,8 +400,8 @@ def peak_truncation(family, system, thetas, omegas, rms, K, *, solver: str = "li
     segment: each design solved again at its peak (the frequency of its largest RMS over
     converged points and meshes) with one angle's order doubled at a time
     (:func:`~gearjax._studies.harmonics.widened`), from the same start as the batch, and
-    the largest relative change of a mesh's RMS alternating force (a mesh below
-    ``RMS_FLOOR`` of the largest judged against that share, as
+    the largest relative change of a mesh's RMS alternating force
+    (:func:`~gearjax._studies.harmonics.rms_change`, as
     :func:`~gearjax._studies.harmonics.truncation_change`).
 
     **Arguments:** ``family``: ``theta -> System``; ``system``: the nominal system (its
@@ -434,9 +435,8 @@ def peak_truncation(family, system, thetas, omegas, rms, K, *, solver: str = "li
         b, code = batched_rms(family, thetas, om_peak[:, None],
                               _harmonics.settings_for(system, K2), solver=solver,
                               devices=devices)
-        b, ok = np.asarray(b)[:, 0], np.asarray(code == RESULTS.successful)[:, 0] & has
-        floor = _harmonics.RMS_FLOOR * np.maximum(np.max(b, axis=1), 1e-300)
-        c = np.where(ok, np.max(np.abs(a - b) / np.maximum(b, floor[:, None]), axis=1), np.nan)
+        ok = np.asarray(code == RESULTS.successful)[:, 0] & has
+        c = np.where(ok, _harmonics.rms_change(a, np.asarray(b)[:, 0]), np.nan)
         change, checked = np.maximum(change, c), True
         checks.append({**pair, "change": float(np.nanmax(c)) if np.any(ok) else None})
     return {"target": _harmonics.TRUNCATION_TARGET, "checks": checks,
@@ -475,10 +475,8 @@ def warn_truncation(truncation: dict, study: str, advice: str | None = None) -> 
 
 def truncation_json(truncation: dict) -> dict:
     """:func:`peak_truncation`'s check as JSON values (NaN as ``None``)."""
-    def number(x):
-        return float(x) if np.isfinite(x) else None
     return {"target": truncation["target"], "checks": truncation["checks"],
-            "change": [number(x) for x in truncation["change"]],
+            "change": [json_number(x) for x in truncation["change"]],
             "frequency_hz": [float(x) for x in truncation["frequency_hz"]]}
 
 

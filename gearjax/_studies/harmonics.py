@@ -390,8 +390,7 @@ def truncation_change(problem: _hb.HBProblem, wide: _hb.HBProblem, y, omega,
     mesh's RMS alternating force when the point ``y`` (scaled unknowns of ``problem``)
     at base frequency ``omega`` (rad/s) is solved again with ``wide``, the same problem
     with twice the harmonics (on a torus: one angle's, :func:`widened`; Newton from
-    ``y`` padded with zeros). Meshes below
-    ``RMS_FLOOR`` of the largest RMS are judged against that share.
+    ``y`` padded with zeros), as :func:`rms_change`.
 
     **Returns:** the change; ``inf`` where the doubled solve does not converge.
     """
@@ -403,8 +402,17 @@ def truncation_change(problem: _hb.HBProblem, wide: _hb.HBProblem, y, omega,
     X = jnp.asarray(np.asarray(y).reshape(C, n)) * problem.x_scale
     a = np.asarray(_rms_forces(problem, X, omega, F_static))
     b = np.asarray(_rms_forces(wide, sol.X, omega, F_static))
-    floor = RMS_FLOOR * max(float(np.max(b)), 1e-300)
-    return float(np.max(np.abs(a - b) / np.maximum(b, floor)))
+    return float(rms_change(a, b))
+
+
+def rms_change(a, b):
+    """The largest relative change of a mesh's RMS alternating force from ``a`` to ``b``
+    (``(..., m)``, N; ``b`` the wider truncation's), over the last axis: a mesh below
+    ``RMS_FLOOR`` of the largest of ``b`` is judged against that share. **Returns:** an
+    array of the leading shape (NaN where a value is)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    floor = RMS_FLOOR * np.maximum(np.max(b, axis=-1, keepdims=True), 1e-300)
+    return np.max(np.abs(a - b) / np.maximum(b, floor), axis=-1)
 
 
 @one_program

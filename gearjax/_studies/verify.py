@@ -61,7 +61,7 @@ from .._engine import hb as _hb
 from .._engine import time_domain as td
 from .._engine.results import RESULTS, result_word
 from .._errors import bad_argument
-from .._io.results import sweep_dataset
+from .._io.results import json_number, sweep_dataset
 from .._gear.case import GearCase, gear_case
 from .._engine import windowed as wd
 from .._gear.case import torus_fields
@@ -442,13 +442,15 @@ def verify_json(result: VerifyResult) -> dict:
     points = []
     for k in range(hb.sizes["point"]):
         res_hb, res_ni = str(hb["result"].values[k]), str(ni["result"].values[k])
+        point_checks = checks[k] if k < len(checks) else []
         conv_hb, conv_ni = bool(hb["converged"].values[k]), bool(ni["converged"].values[k])
         meshes = []
         for j, name in enumerate(names):
             mesh = {"name": str(name), "stage": str(stage[j]), "side": str(side[j]),
-                    "planet": int(planet[j]), "rms_hb": _number(result.rms_hb[k, j]),
-                    "rms_ni": _number(result.rms_ni[k, j]),
-                    "rel_diff": _number(result.rel_diff[k, j]), "ok": bool(result.ok[k, j])}
+                    "planet": int(planet[j]), "rms_hb": json_number(result.rms_hb[k, j]),
+                    "rms_ni": json_number(result.rms_ni[k, j]),
+                    "rel_diff": json_number(result.rel_diff[k, j]),
+                    "ok": bool(result.ok[k, j])}
             if mesh["rel_diff"] is None:
                 why = [f"harmonic balance {res_hb}"] if not conv_hb else []
                 if not conv_ni:
@@ -470,19 +472,19 @@ def verify_json(result: VerifyResult) -> dict:
             "stable": None if stable < 0 else bool(stable),
             "period": int(ni["period"].values[k]) or None,  # 0: no repeat found
             "harmonics": None if torus else int(hb["harmonics"].values[k]),
-            "truncation": checks[k] if k < len(checks) else [],
+            "truncation": point_checks,
             "ok": bool(np.all(result.ok[k])),
             "meshes": meshes,
         })
         if torus:
-            points[-1].update(_torus_point(result, k, conv_hb, res_ni))
+            points[-1].update(_torus_point(result, k, conv_hb, res_ni, point_checks))
     out = {
         "gear": hb.attrs.get("gear"),
         "reference_stage": hb.attrs.get("reference_stage"),
         "tolerance": result.tolerance,
         "relative_to": "largest rms_hb of the mesh's stage at that point",
         "all_ok": result.all_ok,
-        "max_rel_diff": _number(np.nanmax(result.rel_diff)) if np.any(
+        "max_rel_diff": json_number(np.nanmax(result.rel_diff)) if np.any(
             np.isfinite(result.rel_diff)) else None,
         "seconds": result.seconds,
         "points": points,
@@ -508,11 +510,14 @@ AGREEMENT = {
 """The per-point ``agreement`` of a quasi-periodic verification, and what each means."""
 
 
-def _torus_point(result: VerifyResult, k: int, conv_hb: bool, res_ni: str) -> dict:
+def _torus_point(result: VerifyResult, k: int, conv_hb: bool, res_ni: str,
+                 checks: list) -> dict:
     """The fields a quasi-periodic verification adds to point ``k`` of the JSON: the
-    orders per angle, no period (with the reason), the windows, and the
-    ``agreement`` (:data:`AGREEMENT`) with its ``agreement_reason``."""
+    orders per angle, no period (with the reason), the windows, the ``agreement``
+    (:data:`AGREEMENT`) with its ``agreement_reason``, and where the answers differ the
+    ``shortfall`` judged from the point's truncation ``checks`` (:func:`shortfall`)."""
     ni = result.ni
+    K = [int(v) for v in result.hb["harmonics"].values[k]]
     if not conv_hb:
         word = "hb_failed"
     elif res_ni == "not_stationary":
@@ -523,22 +528,19 @@ def _torus_point(result: VerifyResult, k: int, conv_hb: bool, res_ni: str) -> di
         word = "agree" if bool(np.all(result.ok[k])) else "differ"
     side = why = None
     if word == "differ":
-        checks = json.loads(result.hb.attrs["solver"])["truncation_checks"]
-        K = [int(v) for v in result.hb["harmonics"].values[k]]
-        side, why = shortfall([c for c in (checks[k] if k < len(checks) else [])
-                               if c["K"] == K],
+        side, why = shortfall([c for c in checks if c["K"] == K],
                               float(ni["window_change"].values[k]),
                               result.reference["agreement_tolerance"], result.tolerance)
-    return {"harmonics": [int(v) for v in result.hb["harmonics"].values[k]],
+    return {"harmonics": K,
             "period": None,
             "period_reason": "quasi-periodic: the mesh frequencies fall in incommensurate "
                              "groups, so the response never repeats; the integration's "
                              "statistics are over windows",
             "windows": int(ni["windows"].values[k]),
-            "window_s": _number(ni["window_s"].values[k]),
-            "window_change": _number(ni["window_change"].values[k]),
+            "window_s": json_number(ni["window_s"].values[k]),
+            "window_change": json_number(ni["window_change"].values[k]),
             "agreement": word, "agreement_reason": AGREEMENT[word],
-            "shortfall": side, "shortfall_reason": why if side is not None else None}
+            "shortfall": side, "shortfall_reason": why}
 
 
 SHORTFALL = ("harmonic_balance", "integration", "neither")
@@ -580,7 +582,3 @@ def shortfall(checks: list, window_change: float, window_tol: float,
                        f"{max(made):.2%}, windows within {window_change:.2%}): the "
                        "difference is the response's")
 
-
-def _number(x) -> float | None:
-    x = float(x)
-    return x if np.isfinite(x) else None

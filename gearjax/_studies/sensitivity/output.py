@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..._io.results import json_number
 from ..harmonics import TRUNCATION_TARGET
 from .point import Sensitivity
 from .steps import RANKING_RULE
@@ -76,7 +77,8 @@ def sensitivity_json(result: Sensitivity, top: int | None = None) -> dict:
                "normalised": float(result.normalised[k]),
                "step": None if result.steps is None else float(result.steps[k]),
                "step_rule": rules[k],
-               "relative": None if result.relative is None else _finite(result.relative[k])}
+               "relative": (None if result.relative is None
+                            else json_number(result.relative[k]))}
         if not np.isfinite(result.normalised[k]):
             row["normalised"] = None
             row["reason"] = (
@@ -88,7 +90,3 @@ def sensitivity_json(result: Sensitivity, top: int | None = None) -> dict:
     out["derivatives"] = rows
     return out
 
-
-def _finite(x) -> float | None:
-    x = float(x)
-    return x if np.isfinite(x) else None
