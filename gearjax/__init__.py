@@ -137,6 +137,20 @@ from ._io.results import (
     sweep_dataset as sweep_dataset,
 )
 from ._studies.simulate import simulate_gear as simulate_gear
+from ._studies.study import (
+    StudyResult as StudyResult,
+    StudySpec as StudySpec,
+    candidate_train as candidate_train,
+    load_study as load_study,
+    load_study_results as load_study_results,
+    loads_study as loads_study,
+    study as study,
+)
+from ._studies.study.report import (
+    candidate_records as candidate_records,
+    merit_values as merit_values,
+    pareto as pareto,
+)
 from ._studies.validity import (
     ContactLossWarning as ContactLossWarning,
     contact_loss as contact_loss,
@@ -217,6 +231,7 @@ from ._plot.figures import (
     response_figure as response_figure,
     separation_figure as separation_figure,
 )
+from ._plot.study_figure import study_figure as study_figure
 from ._plot.save import (
     plot_mode_shapes as plot_mode_shapes,
     plot_optimize as plot_optimize,

@@ -1,5 +1,5 @@
 """The ``gearjax`` command line (interface.md): info, modes, calibrate, sweep, simulate,
-verify, sensitivity, optimize, plot.
+verify, sensitivity, optimize, study, plot.
 
 Why this module is long: it is the one module that knows flag names and exit codes, so
 the parser of every command, their handlers and the translation of library errors into
@@ -61,6 +61,8 @@ ARGUMENT_FLAGS = {
     "from_hz": "--from", "to_hz": "--to", "eta": "--eta", "max_step_hz": "--max-step",
     "points": "--points", "max_points": "--max-points", "smoothing": "--smoothing",
     "resume": "--resume", "journal": "--out",  # the command line keeps it as --out FILE.journal
+    # study, and plot of a study
+    "store": "--out", "workers": "--workers", "client": "--scheduler", "merit": "--pareto",
     # info
     "input_rpm": "--input-rpm",
     # simulate, verify
@@ -205,6 +207,11 @@ def _interrupted(args) -> str:
     from ._io.journal import journal_path
 
     out = getattr(args, "out", None)
+    if getattr(args, "command", None) == "study":
+        store = out or str(pathlib.Path(args.study).with_suffix(".study"))
+        if pathlib.Path(store).is_dir():
+            return (f"gearjax: interrupted; the finished candidates are in {store}: run the "
+                    "same command with --resume to go on")
     if getattr(args, "command", None) == "sweep" and out and journal_path(out).exists():
         return (f"gearjax: interrupted; the points found so far are in {journal_path(out)}: "
                 "run the same command with --resume to go on")
@@ -227,7 +234,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 _COMMANDS = ("info", "modes", "calibrate", "sweep", "simulate", "verify", "sensitivity",
-             "optimize", "plot")
+             "optimize", "study", "plot")
 
 
 def _usage_message(prog: str, message: str) -> str:
@@ -275,8 +282,11 @@ def _check_outputs(args) -> None:
         fig = pathlib.Path(out) if out else results.with_suffix(".png")
         if os.path.abspath(fig) == os.path.abspath(results):
             raise fail("command line", "--out", str(fig), "would overwrite the results file")
-        if results.is_file():  # else plot_results says there is no such results file
+        if results.exists():  # else plot_results says there is no such results file
             _check_figure("--out" if out else "--out (default: RESULTS with .png)", str(fig))
+    elif cmd == "study":
+        if out is not None:
+            _check_store(out)
     elif out is not None:
         rule = SUFFIX_RULES[RESULT_SUFFIXES[cmd]]
         if cmd == "verify":
@@ -309,6 +319,17 @@ def _check_output(flag: str, value: str, suffixes: tuple[str, ...], rule: str) -
     except OSError as e:
         raise fail("command line", flag, value, f"its directory {str(parent)!r} is not "
                    f"writable ({e.strerror or e})") from None
+
+
+def _check_store(value: str) -> None:
+    """A study store: a directory, or a name whose directory exists."""
+    path = pathlib.Path(value)
+    if path.exists() and not path.is_dir():
+        raise fail("command line", "--out", value, "is a file: a study store is a directory")
+    parent = path.parent
+    if not parent.is_dir():
+        raise fail("command line", "--out", value,
+                   f"its directory {str(parent)!r} does not exist")
 
 
 def _check_figure(flag: str, value: str) -> None:
@@ -486,10 +507,31 @@ def _parser() -> argparse.ArgumentParser:
                    help="L-BFGS iterations of the continuous relaxation (0: skip)")
     c.add_argument("--passes", type=int, default=1, metavar="N",
                    help="rounds over the stages (default 1)")
-    c = sub.add_parser("plot", help="redraw a saved result (sweep, simulate, verify, optimize)",
-                       description="redraw a saved result (sweep, simulate, verify, optimize) without "
-                                   "recomputing")
-    c.add_argument("results", metavar="RESULTS.nc", help="a results file written with --out")
+    c = sub.add_parser("study", help="a design study: candidate trains varied from a base "
+                       "train, each analysed on a Dask cluster (a study file, TOML)",
+                       description="a design study: candidate trains varied from a base "
+                                   "train, each analysed on a Dask cluster")
+    c.add_argument("study", metavar="STUDY.toml", help="the study file")
+    c.add_argument("--out", metavar="DIR", help="the study store: one result file per "
+                   "candidate (default: STUDY with .study)")
+    c.add_argument("--resume", action="store_true",
+                   help="run only the candidates the store has no result for")
+    c.add_argument("--workers", type=int, metavar="N",
+                   help="worker processes of the local cluster (default: this machine's "
+                        "cores; 0: every candidate in this process)")
+    c.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on an existing Dask cluster (e.g. tcp://host:8786)")
+    c.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    c.set_defaults(run=_study_cmd, needs_train=False)
+    c = sub.add_parser("plot", help="redraw a saved result (sweep, simulate, verify, optimize, "
+                       "study)",
+                       description="redraw a saved result (sweep, simulate, verify, optimize, "
+                                   "study) without recomputing")
+    c.add_argument("results", metavar="RESULTS.nc",
+                   help="a results file written with --out, or a study store (directory)")
+    c.add_argument("--pareto", nargs=2, metavar=("MERIT", "MERIT"),
+                   help="a study's Pareto set of these two figures of merit (default: the "
+                        "first two it has)")
     c.add_argument("--what", choices=("rms", "dlf", "separation", "torque"), default="rms",
                    help="RMS mesh force, dynamic load factor, separation share or mean torque")
     c.add_argument("--out", metavar="FIG", help="figure file (default: RESULTS with .png)")
@@ -1075,12 +1117,90 @@ def _plot_cmd(args, train, notes) -> int:
 
     results = pathlib.Path(args.results)
     fig = pathlib.Path(args.out) if args.out else results.with_suffix(".png")
+    if results.is_dir():
+        return _plot_study(args, results, fig)
+    if args.pareto is not None:
+        raise fail("command line", "--pareto", " ".join(args.pareto),
+                   "is for a study store; RESULTS is a file")
     with _atomic(fig) as tmp:
         kind, _ = plot_results(results, tmp, what=args.what)
     if args.json:
         return _emit({"results": args.results, "kind": kind, "what": args.what,
                       "figure": str(fig)})
     print(f"{kind} results {args.results}: figure ({args.what}) written to {fig}")
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------------- study
+
+
+def _study_cmd(args, train, notes) -> int:
+    from ._studies.study import load_study, study
+    from ._studies.study.report import study_json
+
+    spec = load_study(args.study)
+    store = args.out or str(pathlib.Path(args.study).with_suffix(".study"))
+    client = None
+    if args.scheduler is not None:
+        if args.workers is not None:
+            raise fail("command line", "--workers", args.workers,
+                       "is for the local cluster; --scheduler names a cluster with its own "
+                       "workers")
+        from dask.distributed import Client
+
+        try:
+            client = Client(args.scheduler, timeout=30)
+        except OSError as e:
+            raise fail("command line", "--scheduler", args.scheduler,
+                       f"no Dask scheduler answers there ({_one_line(e, 120)})") from None
+    try:
+        result = study(spec, store, client=client, workers=args.workers, resume=args.resume,
+                       say=_stderr)
+    finally:
+        if client is not None:
+            client.close()
+    out = study_json(result)
+    out["warnings"] = notes
+    if args.json:
+        return _emit(out)
+    print(f"study {spec.source}: {out['candidates']} candidates ({out['design']}) in "
+          f"{store}: {out['ran']} run now, {out['skipped']} before, {out['refused']} "
+          f"refused, {out['failed']} failed, {out['missing']} missing "
+          f"({out['seconds']:.0f} s)")
+    for rec in out["results"]:
+        values = "; ".join(f"{p} = {v:g}" if isinstance(v, float) else f"{p} = {v}"
+                           for p, v in rec["values"].items())
+        merits = [f"first mode {rec['first_elastic_hz']:.1f} Hz"
+                  if rec["first_elastic_hz"] is not None else ""]
+        for kind in ("linear", "backlash"):
+            if rec[kind] is not None:
+                peaks = ", ".join(f"{s} {_kilo(f)}" for s, f in
+                                  rec[kind]["peak_rms_force"].items())
+                merits.append(f"{kind} peak RMS {peaks}")
+        tail = rec["reason"] if rec["status"] != "done" else "; ".join(m for m in merits if m)
+        print(f"{rec['candidate']:>6} {rec['status']:<8} {values}: {tail}")
+    return EXIT_OK
+
+
+def _kilo(force: float | None) -> str:
+    return "-" if force is None else f"{force / 1e3:.2f} kN"
+
+
+def _plot_study(args, store: pathlib.Path, fig_path: pathlib.Path) -> int:
+    from ._plot.study_figure import study_figure
+    from ._studies.study import load_study_results
+    from ._studies.study.report import pareto
+
+    ds = load_study_results(store)
+    fig = study_figure(ds, None if args.pareto is None else tuple(args.pareto))
+    with _atomic(fig_path) as tmp:
+        fig.savefig(tmp, format=fig_path.suffix.lstrip(".") or "png", dpi=120)
+    best = pareto(ds, *args.pareto) if args.pareto is not None else None
+    if args.json:
+        return _emit({"results": str(store), "kind": "study", "figure": str(fig_path),
+                      "pareto": best})
+    print(f"study results {store}: figure written to {fig_path}"
+          + (f"; Pareto set: candidates {', '.join(map(str, best))}" if best else ""))
     return EXIT_OK
 
 
