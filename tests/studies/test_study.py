@@ -163,3 +163,23 @@ def test_a_candidates_sweep_and_verify_merits_are_those_of_the_library_calls():
     assert got["verify"] == {"max_rel_diff": float(np.nanmax(check.rel_diff)),
                              "ok": check.all_ok, "tolerance": check.tolerance, "points": 1}
     assert any("teeth would leave contact" in line for line in got["warnings"])
+
+
+def test_a_store_another_process_is_running_a_study_on_is_refused(tmp_path):
+    store = tmp_path / "store"
+    spec = gj.load_study(STUDY)
+    from gearjax._studies.study.store import open_store
+
+    open_store(store, spec, 6, resume=False)
+    code = ("import sys, time; from gearjax._io.journal import lock; "
+            f"h = lock({str(store / 'study.json')!r}); print('held', flush=True); "
+            "time.sleep(60)")
+    child = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().strip() == "held"
+        with pytest.raises(gj.TrainError, match=rf"argument store = '{store}': another "
+                           rf"gearjax process \(pid {child.pid}\) is running this study now"):
+            gj.study(spec, store, workers=0, resume=True)
+    finally:
+        child.kill()
+        child.wait()

@@ -112,3 +112,16 @@ def test_a_key_given_as_one_number_for_both_sides_is_split_when_one_side_varies(
         set_value(raw, "couplings.3.stiffness", 2.0)
     with pytest.raises(gj.TrainError, match="holds a list or table in the base train"):
         set_value({"stages": [{"id": "1", "teeth": {"sun": 3}}]}, "1.teeth", 4)
+
+
+def test_candidates_of_one_shape_are_sent_to_one_worker_and_the_load_is_shared():
+    from gearjax._studies.study.run import shape_key, worker_homes
+
+    spec = gj.loads_study((DATA / "helicopter_study.toml").read_text(), base=DATA)
+    keys = [shape_key(candidate_text(spec, c)) for c in candidates(spec)]
+    assert keys[0] == keys[3] and keys[1] == keys[4] and keys[0] != keys[1]
+    homes = worker_homes(keys, ["a", "b"])
+    assert homes[0] == homes[3] and homes[1] == homes[4] and homes[0] != homes[1]
+    assert worker_homes(["x"] * 3 + ["y"] * 2 + ["z"], ["a", "b"]) == \
+        ["a", "a", "a", "b", "b", "b"]
+    assert worker_homes(keys, []) == [None] * 6

@@ -173,7 +173,7 @@ def refusal(text: str, source: str) -> str | None:
 
 def value_words(value) -> str:
     """A candidate's value as the study's dataset shows it: a number as written, a list
-    as ``a, b, c``."""
+    as ``a, b, c`` (12 significant digits)."""
     if isinstance(value, tuple):
-        return ", ".join(f"{x:g}" for x in value)
-    return f"{value:g}"
+        return ", ".join(f"{x:.12g}" for x in value)
+    return f"{value:.12g}"

@@ -6,34 +6,41 @@ one worker process per core, one thread each, with BLAS and gearjax's own thread
 to one (:data:`WORKER_ENV`), so the workers do not compete for the cores. Each
 worker keeps its compiled programs in memory and in the persistent compilation cache
 (:mod:`gearjax._config`), so a worker compiles once per shape of problem, not once per
-candidate. Dask reruns a task whose worker dies on another worker; a candidate whose
-task cannot finish (its workers died every time) is recorded as failed.
+candidate; candidates that share the shapes of their programs (:func:`shape_key`) are
+sent to one worker where they can be (:func:`worker_homes`). Dask reruns a task whose
+worker dies on another worker; a candidate whose task cannot finish (its workers died
+every time) is recorded as failed.
 """
 
 from __future__ import annotations
 
 import contextlib
-import logging
 import dataclasses
+import logging
 import os
 import pathlib
 import time
+import tomllib
 from collections.abc import Callable
 
 import xarray as xr
 
+from ..._config import QUIET_LEVEL
 from ..._errors import bad_argument
+from ..._io.journal import JournalBusy, lock
 from ..concurrency import cores
 from .analysis import analyse_candidate
 from .candidates import Candidate, candidate_text, candidates, check_paths, refusal
 from .spec import StudySpec, load_study
-from .store import done_indices, load_study_results, open_store, write_candidate
+from .store import IDENTITY, done_indices, load_study_results, open_store, write_candidate
 
 WORKER_ENV = {"GEARJAX_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-              "MKL_NUM_THREADS": "1"}
+              "MKL_NUM_THREADS": "1", "JAX_LOGGING_LEVEL": QUIET_LEVEL}
 """Environment of a ``LocalCluster``'s worker processes: gearjax's threads
-(:mod:`gearjax._studies.concurrency`) and BLAS held to one. XLA's own CPU thread pool,
-which the compiled programs' dense algebra uses, is left as it is."""
+(:mod:`gearjax._studies.concurrency`) and BLAS held to one, and JAX's and XLA's log
+messages kept off the terminal as the command line keeps them
+(:func:`gearjax._config.quiet_jax_logs`). XLA's own CPU thread pool, which the compiled
+programs' dense algebra uses, is left as it is."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,12 +70,14 @@ def study(spec: StudySpec | str | os.PathLike, store, *, client=None,
     worker processes of that ``LocalCluster`` (default: this machine's cores; ``0``: no
     cluster, every candidate in this process, one after another); ``resume``: run only
     the candidates ``store`` has no result for (a store of another study is refused);
-    ``say(line)``: called with a line of progress per finished candidate.
+    ``say(line)``: called with a line of progress per finished candidate. The store is
+    locked while the study runs.
 
     **Raises:** ``TrainError`` (one line: file, field, value, rule), before any
     candidate runs, for a study file, base train or gear that breaks a rule, a varied
-    path that names nothing in the base train, or a store that cannot be used; an
-    ``ArgumentError`` for ``workers`` below 0 or given with ``client``."""
+    path that names nothing in the base train, or a store that cannot be used (another
+    process runs a study on it); an ``ArgumentError`` for ``workers`` below 0 or given
+    with ``client``."""
     from ..._gear.toml_io import loads_train
 
     t0 = time.perf_counter()
@@ -85,6 +94,19 @@ def study(spec: StudySpec | str | os.PathLike, store, *, client=None,
     check_paths(spec)
     every = candidates(spec)
     path = open_store(store, spec, len(every), resume=resume)
+    try:
+        hold = lock(path / IDENTITY)
+    except JournalBusy as e:
+        who = f"pid {e.pid}" if e.pid else "pid unknown"
+        raise bad_argument("store", str(path), f"another gearjax process ({who}) is running "
+                           "this study now: wait for it, or choose another store") from None
+    try:
+        return _run_study(spec, every, path, client, workers, say, t0)
+    finally:
+        hold.release()
+
+
+def _run_study(spec: StudySpec, every, path, client, workers, say, t0) -> StudyResult:
     done = done_indices(path)
     todo = [c for c in every if c.index not in done]
     progress = _Progress(len(every), len(done), say)
@@ -134,28 +156,69 @@ def _cluster(client, workers: int | None):
 def _run_tasks(client, spec: StudySpec, runnable, analysis: dict, path, progress) -> None:
     from dask.distributed import as_completed
 
+    home = worker_homes([shape_key(text) for _, text in runnable], _workers(client))
     futures = {}
-    for c, text in runnable:
+    for (c, text), worker in zip(runnable, home):
         key = f"gearjax-candidate-{spec.digest[:12]}-{c.index}"
+        where = {} if worker is None else {"workers": [worker], "allow_other_workers": True}
         futures[client.submit(analyse_candidate, text, _source(spec, c), spec.gear,
-                              analysis, key=key)] = c
+                              analysis, key=key, **where)] = c
     progress.running = min(len(futures), _worker_count(client))
-    for fut in as_completed(futures):
-        c = futures[fut]
-        try:
-            merits = fut.result()
-        except Exception as e:  # noqa: BLE001  e.g. KilledWorker: the task's workers died
-            merits = {"status": "failed", "reason": f"{type(e).__name__}: {e}",
-                      "warnings": [], "seconds": 0.0}
-        write_candidate(path, spec, c, merits)
-        progress.finished(c, merits)
+    try:
+        for fut in as_completed(futures):
+            c = futures[fut]
+            try:
+                merits = fut.result()
+            except Exception as e:  # noqa: BLE001  e.g. KilledWorker: its workers died
+                merits = {"status": "failed", "reason": f"{type(e).__name__}: {e}",
+                          "warnings": [], "seconds": 0.0}
+            write_candidate(path, spec, c, merits)
+            progress.finished(c, merits)
+    finally:  # interrupted: leave no task running on a cluster that outlives the study
+        client.cancel(list(futures))
 
 
 def _worker_count(client) -> int:
+    return max(1, len(_workers(client)))
+
+
+def _workers(client) -> list[str]:
     try:
-        return max(1, len(client.scheduler_info().get("workers", {})))
-    except Exception:  # noqa: BLE001  a scheduler that does not answer: count one
-        return 1
+        return sorted(client.scheduler_info().get("workers", {}))
+    except Exception:  # noqa: BLE001  a scheduler that does not answer: no preference
+        return []
+
+
+def shape_key(text: str) -> tuple:
+    """What decides the shapes of a candidate's compiled programs: per stage its planet
+    count and tooth counts (the mesh frequency ratios, hence the harmonics), and the
+    stiffness harmonics. Candidates with one key reuse each other's programs."""
+    raw = tomllib.loads(text)
+    stages = tuple((len(s.get("planet_angles_deg", ())),
+                    tuple(sorted((s.get("teeth") or {}).items())))
+                   for s in raw.get("stages", []) if isinstance(s, dict))
+    return stages, raw.get("stiffness_harmonics")
+
+
+def worker_homes(keys: list, workers: list[str]) -> list[str | None]:
+    """A preferred worker per candidate, so that candidates of one :func:`shape_key` go
+    to one worker, which compiles their programs once: the keys, largest group first,
+    each to the worker with the fewest candidates so far. A preference, not a rule: an
+    idle worker still takes a waiting candidate (``allow_other_workers``). ``None``
+    (no preference) where no worker is known."""
+    if not workers:
+        return [None] * len(keys)
+    groups: dict = {}
+    for i, key in enumerate(keys):
+        groups.setdefault(key, []).append(i)
+    load = dict.fromkeys(workers, 0)
+    home: list[str | None] = [None] * len(keys)
+    for members in sorted(groups.values(), key=len, reverse=True):
+        worker = min(workers, key=lambda w: load[w])
+        load[worker] += len(members)
+        for i in members:
+            home[i] = worker
+    return home
 
 
 class _Progress:
