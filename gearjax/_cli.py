@@ -1177,6 +1177,10 @@ def _study_cmd(args, train, notes) -> int:
                 peaks = ", ".join(f"{s} {_kilo(f)}" for s, f in
                                   rec[kind]["peak_rms_force"].items())
                 merits.append(f"{kind} peak RMS {peaks}")
+        check = rec["verify"]
+        if check is not None and check["max_rel_diff"] is not None:
+            merits.append(f"verify {check['max_rel_diff']:.2%} "
+                          f"({'within' if check['ok'] else 'beyond'} {check['tolerance']:.0%})")
         tail = rec["reason"] if rec["status"] != "done" else "; ".join(m for m in merits if m)
         print(f"{rec['candidate']:>6} {rec['status']:<8} {values}: {tail}")
     return EXIT_OK
@@ -1187,20 +1191,23 @@ def _kilo(force: float | None) -> str:
 
 
 def _plot_study(args, store: pathlib.Path, fig_path: pathlib.Path) -> int:
-    from ._plot.study_figure import study_figure
+    from ._plot.study_figure import pareto_pair, study_figure
     from ._studies.study import load_study_results
     from ._studies.study.report import pareto
 
     ds = load_study_results(store)
-    fig = study_figure(ds, None if args.pareto is None else tuple(args.pareto))
+    pair = pareto_pair(ds, None if args.pareto is None else tuple(args.pareto))
+    fig = study_figure(ds, pair)
     with _atomic(fig_path) as tmp:
         fig.savefig(tmp, format=fig_path.suffix.lstrip(".") or "png", dpi=120)
-    best = pareto(ds, *args.pareto) if args.pareto is not None else None
+    best = pareto(ds, *pair) if pair is not None else None
     if args.json:
         return _emit({"results": str(store), "kind": "study", "figure": str(fig_path),
+                      "pareto_merits": None if pair is None else list(pair),
                       "pareto": best})
     print(f"study results {store}: figure written to {fig_path}"
-          + (f"; Pareto set: candidates {', '.join(map(str, best))}" if best else ""))
+          + (f"; Pareto set of {pair[0]} and {pair[1]}: candidates "
+             f"{', '.join(map(str, best))}" if pair is not None else ""))
     return EXIT_OK
 
 

@@ -32,6 +32,16 @@ def study_merits(ds) -> list[str]:
     return out
 
 
+def pareto_pair(ds, pareto_merits: tuple[str, str] | None = None) -> tuple[str, str] | None:
+    """The two merits whose Pareto set :func:`study_figure` draws: ``pareto_merits``
+    where given, else the first two :func:`study_merits` of ``ds`` (``None`` where it
+    has fewer)."""
+    if pareto_merits is not None:
+        return tuple(pareto_merits)
+    merits = study_merits(ds)
+    return (merits[0], merits[1]) if len(merits) >= 2 else None
+
+
 def study_figure(ds, pareto_merits: tuple[str, str] | None = None, title: str = ""):
     """A study (:func:`gearjax.load_study_results`): one row per figure of merit it has
     (:func:`study_merits`), one column per varied path (numbers on a linear axis, lists
@@ -46,8 +56,7 @@ def study_figure(ds, pareto_merits: tuple[str, str] | None = None, title: str = 
 
     merits = study_merits(ds)
     paths = varied_paths(ds)
-    if pareto_merits is None and len(merits) >= 2:
-        pareto_merits = (merits[0], merits[1])
+    pareto_merits = pareto_pair(ds, pareto_merits)
     rows = len(merits) + (pareto_merits is not None)
     cols = max(len(paths), 1)
     fig = Figure(figsize=(3.4 * cols + 0.6, 2.6 * max(rows, 1) + 0.6), layout="constrained")

@@ -88,7 +88,7 @@ def test_plot_of_a_study_store_draws_the_pareto_set(store, tmp_path, capsys):
     code, out, _ = run(capsys, "plot", store, "--out", fig, "--json")
     assert code == 0 and fig.stat().st_size > 10_000
     assert json.loads(out) == {"results": str(store), "kind": "study", "figure": str(fig),
-                               "pareto": None}
+                               "pareto_merits": None, "pareto": None}  # one merit only
     code, _, err = run(capsys, "plot", store, "--out", fig, "--pareto", "first_elastic_hz",
                        "linear_peak_rms_force")
     assert code == 2
