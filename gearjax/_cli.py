@@ -208,7 +208,7 @@ def _interrupted(args) -> str:
 
     out = getattr(args, "out", None)
     if getattr(args, "command", None) == "study":
-        store = out or str(pathlib.Path(args.study).with_suffix(".study"))
+        store = _study_store(args)
         if pathlib.Path(store).is_dir():
             return (f"gearjax: interrupted; the finished candidates are in {store}: run the "
                     "same command with --resume to go on")
@@ -1139,7 +1139,7 @@ def _study_cmd(args, train, notes) -> int:
     from ._studies.study.report import study_json
 
     spec = load_study(args.study)
-    store = args.out or str(pathlib.Path(args.study).with_suffix(".study"))
+    store = _study_store(args)
     client = None
     if args.scheduler is not None:
         if args.workers is not None:
@@ -1184,6 +1184,11 @@ def _study_cmd(args, train, notes) -> int:
         tail = rec["reason"] if rec["status"] != "done" else "; ".join(m for m in merits if m)
         print(f"{rec['candidate']:>6} {rec['status']:<8} {values}: {tail}")
     return EXIT_OK
+
+
+def _study_store(args) -> str:
+    """The study store: ``--out``, else the study file with ``.study``."""
+    return args.out or str(pathlib.Path(args.study).with_suffix(".study"))
 
 
 def _kilo(force: float | None) -> str:

@@ -183,3 +183,20 @@ def test_a_store_another_process_is_running_a_study_on_is_refused(tmp_path):
     finally:
         child.kill()
         child.wait()
+
+
+def test_a_complete_sweep_stopped_by_its_budget_is_flagged_in_the_dataset_and_json():
+    from gearjax._studies.study.candidates import candidates
+    from gearjax._studies.study.store import candidate_dataset
+
+    spec = gj.load_study(STUDY)
+    sweep = {"peak_rms_force": [5.0], "peak_hz": [2600.0], "coexisting_hz": 0.0, "jumps": [],
+             "stop": "max_points", "points": 5, "failed": 0, "complete": False}
+    merits = {"status": "done", "reason": "", "warnings": [], "seconds": 1.0,
+              "backlash": sweep}
+    ds = candidate_dataset(spec, candidates(spec)[0], merits)
+    assert int(ds["backlash_complete"][0]) == 0
+    (record,) = gj.candidate_records(ds)
+    assert record["backlash"]["complete"] is False and record["backlash"]["stop"] == "max_points"
+    ds = candidate_dataset(spec, candidates(spec)[0], {**merits, "backlash": None})
+    assert int(ds["backlash_complete"][0]) == -1 and gj.candidate_records(ds)[0]["backlash"] is None

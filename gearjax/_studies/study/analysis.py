@@ -7,7 +7,6 @@ any worker of a Dask cluster, and gives the same numbers wherever it runs.
 
 from __future__ import annotations
 
-import json
 import time
 import warnings
 
@@ -26,11 +25,14 @@ def analyse_candidate(text: str, source: str, gear: str | None, analysis: dict) 
     ``text`` (named ``source`` in messages), gear ``gear``.
 
     **Returns:** ``{"status", "reason", "warnings", "seconds", "stages",
-    "first_elastic_hz", "linear", "backlash", "verify"}``: ``status`` one of :data:`STATUSES` and
-    its one-line ``reason`` (empty when done); the warnings the analyses gave and why a
-    sweep's stage has no peak (one line each); the stage ids; the first elastic natural
-    frequency (Hz; ``None`` where not asked); per sweep asked for (else ``None``)
-    :func:`sweep_merits`. Never raises for
+    "first_elastic_hz", "linear", "backlash", "verify"}``: ``status`` one of
+    :data:`STATUSES` and its one-line ``reason`` (empty when done); the warnings the
+    analyses gave and why a sweep's stage has no peak or a complete sweep is not (one
+    line each); the stage ids; the first elastic natural frequency (Hz; ``None`` where
+    not asked); per sweep asked for (else ``None``) :func:`sweep_merits` (the backlash
+    sweep's with ``complete``:
+    :func:`~gearjax._studies.optimize.nonlinear.sweep_complete`); ``verify``
+    (:func:`verify_merits`, ``None`` where not asked). Never raises for
     the candidate's own failures: they are its status."""
     from ..._gear.toml_io import loads_train
 
@@ -62,6 +64,7 @@ def analyse_candidate(text: str, source: str, gear: str | None, analysis: dict) 
 def _run(train, gear: str | None, analysis: dict, out: dict) -> None:
     from ..._engine.modal import modes
     from ..._gear.assembly import assemble
+    from ..optimize.nonlinear import sweep_complete
     from ..sweep import sweep
     from ..verify import verify_gear
 
@@ -78,10 +81,17 @@ def _run(train, gear: str | None, analysis: dict, out: dict) -> None:
     nl = analysis.get("backlash")
     if nl is not None:
         lo, hi = nl["band_hz"]
+        max_points = nl.get("max_points", 3000)
         result = sweep(train, name, lo, hi, harmonics=nl.get("harmonics"),
-                       max_points=nl.get("max_points", 3000),
-                       max_step_hz=nl.get("max_step_hz"), complete=True)
+                       max_points=max_points, max_step_hz=nl.get("max_step_hz"),
+                       complete=True)
         out["backlash"] = sweep_merits(result)
+        out["backlash"]["complete"] = sweep_complete(result, max_points)
+        if not out["backlash"]["complete"]:
+            out["backlash"]["notes"].append(
+                f"not complete (stopped: {result.stop}; the point budget {max_points} or the "
+                "cap on branches ran out): its peak and coexisting bands are over the states "
+                "it found")
     check = analysis.get("verify")
     if check is not None:
         result = verify_gear(train, name, list(check["at_hz"]), linear=check["linear"],
@@ -117,7 +127,7 @@ def sweep_merits(result) -> dict:
     return {"peak_rms_force": [row["rms_force"] for row in largest],
             "peak_hz": [row["mesh_frequency_hz"] for row in largest],
             "coexisting_hz": float(sum(b - a for a, b in coexisting_bands(ds))),
-            "jumps": json.loads(json.dumps(coexisting_jumps(ds))),
+            "jumps": coexisting_jumps(ds),
             "stop": str(result.stop), "points": int(converged.size),
             "failed": int((~converged).sum()),
             "notes": [f"stage {row['stage']}: {row['reason']}" for row in largest

@@ -4,11 +4,11 @@ set of two figures of merit."""
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 
 from ..._errors import bad_argument
+from ..._io.results import json_number
 
 MERITS = ("first_elastic_hz", "linear_peak_rms_force", "backlash_peak_rms_force",
           "linear_coexisting_hz", "backlash_coexisting_hz", "verify_max_rel_diff")
@@ -29,8 +29,8 @@ def candidate_records(ds) -> list[dict]:
     ``candidate``, ``values`` (path -> value), ``status``, ``reason``, ``notes`` (list
     of lines), ``seconds``, ``first_elastic_hz`` and per sweep kind run (else ``None``)
     ``{"peak_rms_force": {stage: N}, "peak_hz": {stage: Hz}, "coexisting_hz", "jumps",
-    "stop", "points", "failed"}``, and ``verify`` (``{"max_rel_diff", "ok",
-    "tolerance"}``, else ``None``)."""
+    "stop", "points", "failed"}`` (the backlash sweep's with ``complete``), and
+    ``verify`` (``{"max_rel_diff", "ok", "tolerance"}``, else ``None``)."""
     stages = [str(s) for s in ds["stage"].values]
     out = []
     for k in range(ds.sizes["candidate"]):
@@ -39,24 +39,26 @@ def candidate_records(ds) -> list[dict]:
                "values": {p: _plain(row[p].values) for p in varied_paths(ds)},
                "status": str(row["status"].values), "reason": str(row["reason"].values),
                "notes": [n for n in str(row["notes"].values).split("\n") if n],
-               "seconds": _number(row["seconds"]),
-               "first_elastic_hz": _number(row["first_elastic_hz"])}
+               "seconds": json_number(row["seconds"]),
+               "first_elastic_hz": json_number(row["first_elastic_hz"])}
         for kind in ("linear", "backlash"):
             if int(row[f"{kind}_points"]) < 0:
                 rec[kind] = None
                 continue
             rec[kind] = {
-                "peak_rms_force": dict(zip(stages, map(_number,
+                "peak_rms_force": dict(zip(stages, map(json_number,
                                                        row[f"{kind}_peak_rms_force"].values))),
-                "peak_hz": dict(zip(stages, map(_number, row[f"{kind}_peak_hz"].values))),
-                "coexisting_hz": _number(row[f"{kind}_coexisting_hz"]),
+                "peak_hz": dict(zip(stages, map(json_number, row[f"{kind}_peak_hz"].values))),
+                "coexisting_hz": json_number(row[f"{kind}_coexisting_hz"]),
                 "jumps": json.loads(str(row[f"{kind}_jumps"].values)),
                 "stop": str(row[f"{kind}_stop"].values),
+                **({"complete": bool(int(row["backlash_complete"]))} if kind == "backlash"
+                   else {}),
                 "points": int(row[f"{kind}_points"]), "failed": int(row[f"{kind}_failed"])}
         ok = int(row["verify_ok"])
         rec["verify"] = None if ok < 0 else {
-            "max_rel_diff": _number(row["verify_max_rel_diff"]), "ok": bool(ok),
-            "tolerance": _number(row["verify_tolerance"])}
+            "max_rel_diff": json_number(row["verify_max_rel_diff"]), "ok": bool(ok),
+            "tolerance": json_number(row["verify_tolerance"])}
         out.append(rec)
     return out
 
@@ -91,11 +93,7 @@ def merit_values(ds, merit: str) -> np.ndarray:
     if merit == "first_elastic_hz" and not np.isfinite(ds[merit].values).any():
         raise bad_argument("merit", merit, "the study computed no modes")
     values = np.asarray(ds[merit].values, float)
-    if values.ndim == 2:
-        finite = np.isfinite(values).all(axis=1)
-        values = np.where(finite, np.max(np.where(np.isfinite(values), values, 0), axis=1),
-                          np.nan)
-    return values
+    return values.max(axis=1) if values.ndim == 2 else values  # NaN where a stage has none
 
 
 def pareto(ds, first: str, second: str) -> list[int]:
@@ -119,11 +117,6 @@ def pareto(ds, first: str, second: str) -> list[int]:
 def _oriented(ds, merit: str) -> np.ndarray:
     v = merit_values(ds, merit)
     return -v if merit in LARGER_IS_BETTER else v
-
-
-def _number(x) -> float | None:
-    v = float(x)
-    return None if math.isnan(v) else v
 
 
 def _plain(v):

@@ -49,9 +49,10 @@ def open_store(path, spec: StudySpec, n: int, *, resume: bool) -> pathlib.Path:
             raise bad_argument("store", str(path),
                                f"holds another study ({theirs.get('study')}: its study or train "
                                "file differs): choose another store")
-        if done_indices(path) and not resume:
+        done = len(done_indices(path))
+        if done and not resume:
             raise bad_argument("resume", False,
-                               f"{path} holds {len(done_indices(path))} finished candidates "
+                               f"{path} holds {done} finished candidates "
                                "of this study: resume it, or choose another store")
         return path
     if resume:
@@ -90,7 +91,8 @@ def candidate_dataset(spec: StudySpec, candidate: Candidate, merits: dict) -> xr
     ``reason``, ``notes``, ``seconds``, ``first_elastic_hz`` and, per sweep kind
     (``linear``, ``backlash``), ``KIND_peak_rms_force`` and ``KIND_peak_hz`` over
     ``stage``, ``KIND_coexisting_hz``, ``KIND_jumps`` (JSON), ``KIND_stop``,
-    ``KIND_points``, ``KIND_failed``; ``verify_max_rel_diff``, ``verify_ok`` (1, 0) and
+    ``KIND_points``, ``KIND_failed``; ``backlash_complete`` (1: the complete sweep ran
+    to its end, 0: stopped by its budget); ``verify_max_rel_diff``, ``verify_ok`` (1, 0) and
     ``verify_tolerance``. Values an analysis did not give are NaN (or -1 for counts and
     flags), ``status`` and ``notes`` saying why."""
     stages = base_stages(spec)
@@ -115,6 +117,9 @@ def candidate_dataset(spec: StudySpec, candidate: Candidate, merits: dict) -> xr
         data[f"{kind}_stop"] = (one, [m.get("stop", "")])
         data[f"{kind}_points"] = (one, np.asarray([m.get("points", -1)], np.int64))
         data[f"{kind}_failed"] = (one, np.asarray([m.get("failed", -1)], np.int64))
+    complete = (merits.get("backlash") or {}).get("complete")
+    data["backlash_complete"] = (one, np.asarray([-1 if complete is None else int(complete)],
+                                                 np.int64))
     check = merits.get("verify") or {}
     data["verify_max_rel_diff"] = (one, [_number(check.get("max_rel_diff"))])
     data["verify_ok"] = (one, np.asarray([-1 if not check else int(check["ok"])], np.int64))
