@@ -5,7 +5,10 @@ its strain energy sits (model.md): more than half in ``penalty`` springs (braked
 housing springs, couplings at least that stiff) -> ``penalty``; more than half in
 ``rigid`` springs (free housing springs) -> ``rigid`` (near-rigid-body); otherwise
 ``elastic``. A mode in which no central member moves and only the planets of one
-stage do is a ``planet`` mode of that stage; every other mode is ``overall``.
+stage do is a ``planet`` mode of that stage. In a system with translations (Lin &
+Parker's model) a mode in which no central member translates is ``rotational``, one in
+which none turns ``translational`` (the three types they prove for equally spaced
+planets); every other mode is ``overall``.
 """
 
 from __future__ import annotations
@@ -150,11 +153,25 @@ def _repeated_groups(hz: np.ndarray) -> list[int]:
 
 
 def _family(system: System, v: np.ndarray) -> tuple[str, str | None]:
-    moving = np.abs(v) > STILL_ATOL
+    """``planet`` (only one stage's planets move), in a system with translations
+    (coordinate kind ``translation``) ``rotational`` (no central member translates) or
+    ``translational`` (no central member turns), else ``overall``; and the one stage
+    that moves, if one. With translations the coordinates mix units (rad, m), so
+    motion is judged on mass-weighted amplitudes ``sqrt(M_ii) |v_i|``."""
     kinds = np.asarray(system.dof_kind)
     groups = np.asarray(system.dof_group)
-    if kinds.size and not np.any(moving & (kinds != "planet")):
-        stages = set(groups[moving].tolist())
-        if len(stages) == 1:
-            return "planet", stages.pop()
+    translations = kinds == "translation"
+    if np.any(translations):
+        w = np.abs(v) * np.sqrt(np.abs(np.diag(np.asarray(system.M))))
+        moving = w > STILL_ATOL * np.max(w)
+    else:
+        moving = np.abs(v) > STILL_ATOL
+    stages = set(groups[moving].tolist()) if kinds.size else set()
+    stage = stages.pop() if len(stages) == 1 else None
+    if kinds.size and stage is not None and not np.any(moving & (kinds != "planet")):
+        return "planet", stage
+    if np.any(translations) and not np.any(moving & translations):
+        return "rotational", stage
+    if np.any(translations) and not np.any(moving & (kinds == "central")):
+        return "translational", stage
     return "overall", None

@@ -1,11 +1,14 @@
 """Assembly of a gear train in one gear into the generic ``System`` (model.md).
 
-Coordinates per stage, in order: ``theta_s``, ``theta_r``, ``theta_c`` (absolute
-vibratory rotations) and ``phi_i = theta_pi - theta_c`` for each planet (rad).
-Meshes per stage, in order: ``sp1..spN`` then ``rp1..rpN`` with
+Torsional model: coordinates per stage, in order: ``theta_s``, ``theta_r``,
+``theta_c`` (absolute vibratory rotations) and ``phi_i = theta_pi - theta_c`` for each
+planet (rad). Meshes per stage, in order: ``sp1..spN`` then ``rp1..rpN`` with
 
     p_si = r_s (theta_s - theta_c) + r_p phi_i - e_si(t)
     p_ri = r_r (theta_r - theta_c) - r_p phi_i - e_ri(t)
+
+Translational model: the coordinates, mesh deflections and bearings of
+:mod:`.translational` (Lin & Parker 1999), the same meshes in the same order.
 
 The function is pure in the train's array leaves, so ``jit``, ``vmap`` and ``grad``
 pass through it (design variables are leaves of ``Train``).
@@ -23,6 +26,7 @@ from .mesh_stiffness import mesh_wave, planet_load
 from .phasing import harmonic_phases, stiffness_amplitudes
 from .._engine.system import System
 from .train import MEMBERS, Train, member_index, member_inertia, member_paths
+from . import translational
 
 
 def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = None,
@@ -38,7 +42,8 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
     Housing springs: ``housing.braked`` for members in the gear's ``brakes``,
     ``housing.free`` for every other central member; engaged couplings as springs
     between members, and their dampers (``damping`` or ``damping_ratio``,
-    :meth:`~gearjax._gear.train.Coupling.viscous_damping`) as the only entries of ``C``;
+    :meth:`~gearjax._gear.train.Coupling.viscous_damping`) in ``C``; in the
+    translational model the bearings as springs (elastic) and dampers;
     mean torques: ``input_torque`` on the input, ``-input_torque * ratio`` on the
     output, ``drag_torque`` against the motion of every other free member; ripple on the
     input member at its orders of the input speed.
@@ -61,14 +66,25 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
         i_s, i_r, i_c = offset, offset + 1, offset + 2
         r_s, r_p, r_r = s.base_radii()
         I = s.inertia
-        I_ce = I.carrier + N * (I.planet + s.planet_mass * s.carrier_radius() ** 2)
-        M = M.at[i_s, i_s].set(I.sun).at[i_r, i_r].set(I.ring).at[i_c, i_c].set(I_ce)
-        for i in range(N):
-            ip = offset + 3 + i
-            M = M.at[ip, ip].set(I.planet).at[ip, i_c].set(I.planet).at[i_c, ip].set(I.planet)
-        dof_labels += [f"{s.id}.{m}" for m in MEMBERS] + [f"{s.id}.planet{i + 1}" for i in range(N)]
-        dof_group += [s.id] * (3 + N)
-        dof_kind += ["central"] * 3 + ["planet"] * N
+        if train.translational:
+            M = translational.stage_mass(s, M, offset)
+            rows = translational.mesh_rows(s, offset, n)
+            labels_n, kinds_n = translational.stage_dof_labels(s)
+        else:
+            I_ce = I.carrier + N * (I.planet + s.planet_mass * s.carrier_radius() ** 2)
+            M = M.at[i_s, i_s].set(I.sun).at[i_r, i_r].set(I.ring).at[i_c, i_c].set(I_ce)
+            for i in range(N):
+                ip = offset + 3 + i
+                M = M.at[ip, ip].set(I.planet).at[ip, i_c].set(I.planet).at[i_c, ip].set(I.planet)
+            rows = {side: [jnp.zeros(n).at[i_j].set(r_j).at[i_c].add(-r_j)
+                           .at[offset + 3 + i].set(sign * r_p) for i in range(N)]
+                    for side, i_j, r_j, sign in (("sun", i_s, r_s, 1.0), ("ring", i_r, r_r, -1.0))}
+            labels_n = ([f"{s.id}.{m}" for m in MEMBERS]
+                        + [f"{s.id}.planet{i + 1}" for i in range(N)])
+            kinds_n = ["central"] * 3 + ["planet"] * N
+        dof_labels += labels_n
+        dof_group += [s.id] * len(labels_n)
+        dof_kind += kinds_n
 
         turning = sk.mesh_frequency != 0
         if layout is not None:
@@ -77,10 +93,8 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
             angle_n = 0
             mu_n = kin.mu[train.stages.index(s)] if (turning and kin.mu is not None) else 0
         phases_s, phases_r = harmonic_phases(s, sk.sigma, train.phasing, max(H, H_e))
-        for side, i_j, r_j, I_j, sign, phases in (
-            ("sun", i_s, r_s, I.sun, 1.0, phases_s),
-            ("ring", i_r, r_r, I.ring, -1.0, phases_r),
-        ):
+        for side, r_j, I_j, phases in (("sun", r_s, I.sun, phases_s),
+                                       ("ring", r_r, I.ring, phases_r)):
             if s.stiffness_from_geometry:
                 wave = mesh_wave(s, side, H, load=planet_load(s, sk, g))
                 k_mean, k_a, k_b = wave.mean, wave.k_cos, wave.k_sin
@@ -97,8 +111,7 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
             c = 2 * s.mesh_damping_ratio * jnp.sqrt(k_mean * m_eq)
             on = 1.0 if turning else 0.0
             for i in range(N):
-                row = jnp.zeros(n).at[i_j].set(r_j).at[i_c].add(-r_j).at[offset + 3 + i].set(sign * r_p)
-                W_rows.append(row)
+                W_rows.append(rows[side][i])
                 kbar.append(k_mean)
                 ph = phases[i, :H]
                 k_cos.append(on * (k_a * jnp.cos(ph) + k_b * jnp.sin(ph)))
@@ -118,7 +131,7 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
                 groups.append(s.id)
                 sides.append(side)
                 planets.append(i + 1)
-        offset += 3 + N
+        offset += train.stage_dof(s)
 
     spring_rows, spring_k, spring_class = _springs(train, g, n)
     f_mean, f_cos, f_sin = _forcing(train, g, kin, n)
@@ -158,7 +171,8 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
 
 
 def _springs(train: Train, g, n: int):
-    """Housing springs of every central member and the engaged couplings."""
+    """Housing springs of every central member, the engaged couplings and, in the
+    translational model, the bearings (elastic)."""
     rows, ks, classes = [], [], []
     for path in member_paths(train):
         braked = path in g.brakes
@@ -170,12 +184,20 @@ def _springs(train: Train, g, n: int):
                     .at[member_index(train, c.members[1])].set(-1.0))
         ks.append(c.stiffness)
         classes.append("penalty" if _at_least(c.stiffness, train.housing.braked) else "elastic")
+    offset = 0
+    for s in train.stages if train.translational else ():
+        b_rows, b_ks, _ = translational.bearing_springs(s, offset, n)
+        rows += b_rows
+        ks += b_ks
+        classes += ["elastic"] * len(b_rows)
+        offset += train.stage_dof(s)
     return jnp.stack(rows), jnp.stack(ks), tuple(classes)
 
 
 def _dampers(train: Train, g, n: int):
-    """Viscous matrix ``(n, n)`` (N m s/rad) of the engaged couplings' dampers:
-    ``c (e_i - e_j)(e_i - e_j)^T`` each; exactly zero where no coupling has one."""
+    """Viscous matrix ``(n, n)`` of the engaged couplings' dampers (N m s/rad):
+    ``c (e_i - e_j)(e_i - e_j)^T`` each, and in the translational model the bearings'
+    (:func:`.translational.bearing_damping`); exactly zero where there is neither."""
     C = jnp.zeros((n, n))
     for c in train.engaged_couplings(g.name):
         if not c.damped:
@@ -183,6 +205,10 @@ def _dampers(train: Train, g, n: int):
         i, j = (member_index(train, m) for m in c.members)
         coef = c.viscous_damping(*(member_inertia(train, m) for m in c.members))
         C = C.at[i, i].add(coef).at[j, j].add(coef).at[i, j].add(-coef).at[j, i].add(-coef)
+    offset = 0
+    for s in train.stages if train.translational else ():
+        C = C + translational.bearing_damping(s, offset, n)
+        offset += train.stage_dof(s)
     return C
 
 

@@ -21,6 +21,10 @@ import tomli_w
 
 from .._errors import fail
 from .train import (
+    MEMBERS,
+    MODELS,
+    BearingStiffness,
+    CentralMass,
     Coupling,
     Gear,
     Housing,
@@ -36,17 +40,20 @@ from .train import (
 )
 from .mesh_stiffness import geometric_stiffness
 from .tooth_rules import check_tooth_geometry
+from .toml_reader import TomlReader
 from .bounds import check_ranges
 from .validate import validate_train
 
 BUNDLED_EXAMPLE = "al_shyyab_2009.toml"
 
-_TOP_KEYS = {"name", "stiffness_harmonics", "phasing", "mesh_damping", "stages", "couplings",
-             "housing", "gears"}
+_TOP_KEYS = {"name", "model", "stiffness_harmonics", "phasing", "mesh_damping", "stages",
+             "couplings", "housing", "gears"}
 _STAGE_KEYS = {"id", "teeth", "module_mm", "pressure_angle_deg", "planet_angles_deg",
                "carrier_radius_mm", "contact_ratio", "mesh_stiffness", "mesh_damping_ratio",
                "half_backlash", "sun_ring_phase_deg", "stage_phase_deg", "transmission_error",
-               "inertia", "planet_mass", *("face_width_mm", "profile_shift",
+               "inertia", "planet_mass", "mass", "bearing_stiffness", "bearing_damping_ratio",
+               "base_diameter_mm",
+               *("face_width_mm", "profile_shift",
                "addendum_coefficient", "dedendum_coefficient", "root_radius_coefficient",
                "youngs_modulus", "poisson_ratio", "tip_relief")}
 _GEOMETRY_DEFAULTS = {"addendum_coefficient": 1.0, "dedendum_coefficient": 1.25,
@@ -130,10 +137,11 @@ def loads_train(text: str, source: str | None = None, *, validate: bool = True) 
 
 def train_from_dict(raw: dict, source: str | None = None) -> Train:
     """Build a :class:`Train` from parsed TOML, checking types and single-value rules."""
-    r = _Reader(source)
+    r = TomlReader(source)
     r.keys(raw, _TOP_KEYS, "file")
     default_name = Path(source).stem if source else "train"
     name = r.string(raw, "name", "name", default=default_name)
+    model = r.choice(raw, "model", "model", MODELS, default="torsional")
     harmonics = r.integer(raw, "stiffness_harmonics", "stiffness_harmonics", default=4, low=0)
     phasing = r.choice(raw, "phasing", "phasing", PHASING_RULES, default="physical")
     damping = r.choice(raw, "mesh_damping", "mesh_damping", MESH_DAMPING_RULES, default="always")
@@ -141,7 +149,7 @@ def train_from_dict(raw: dict, source: str | None = None) -> Train:
     stages_raw = raw.get("stages")
     if not isinstance(stages_raw, list) or not stages_raw:
         raise fail(source, "stages", stages_raw, "at least one [[stages]] table is required")
-    stages = tuple(_stage(r, s, i) for i, s in enumerate(stages_raw))
+    stages = tuple(_stage(r, s, i, model) for i, s in enumerate(stages_raw))
     ids = [s.id for s in stages]
     for i, sid in enumerate(ids):
         if sid in ids[:i]:
@@ -174,12 +182,13 @@ def train_from_dict(raw: dict, source: str | None = None) -> Train:
         phasing=phasing,
         mesh_damping=damping,
         source=source,
+        model=model,
     )
     check_ranges(train)  # bounds of every value (warnings come from validate_train)
     return train
 
 
-def _stage(r: _Reader, raw, i: int) -> Stage:
+def _stage(r: TomlReader, raw, i: int, model: str) -> Stage:
     r.table(raw, f"stages[{i}]")
     sid = raw.get("id")
     if not isinstance(sid, str) or not sid or "." in sid:
@@ -230,6 +239,7 @@ def _stage(r: _Reader, raw, i: int) -> Stage:
         }),
         planet_mass=r.number(raw, "planet_mass", f + "planet_mass", low=0.0, strict=True),
         geometry=geometry,
+        **_translational_keys(r, raw, f, model),
     )
     if geometry is None:
         return stage
@@ -237,7 +247,30 @@ def _stage(r: _Reader, raw, i: int) -> Stage:
     return with_geometric_stiffness(stage) if derived else stage
 
 
-def _geometry(r: _Reader, raw, f: str, teeth: Teeth, module, pressure) -> ToothGeometry | None:
+def _translational_keys(r: TomlReader, raw, f: str, model: str) -> dict:
+    """``mass``, ``bearing_stiffness`` (required by the translational model; kept and
+    written back, but unused, by the torsional one), ``bearing_damping_ratio`` and
+    ``base_diameter_mm``."""
+    out = {}
+    for key, cls, names, low, strict in (
+            ("mass", CentralMass, MEMBERS, 0.0, True),
+            ("bearing_stiffness", BearingStiffness, (*MEMBERS, "planet"), 0.0, False),
+            ("base_diameter_mm", PerGear, _GEARS, 0.0, True)):
+        if key not in raw:
+            if model == "translational" and key != "base_diameter_mm":
+                raise r.fail(f + key, None, 'is required when model = "translational" '
+                             f"(a table {{ {', '.join(names)} }})")
+            continue
+        table = r.sub(raw, key, f + key, set(names))
+        out[key] = cls(**{k: r.number(table, k, f"{f}{key}.{k}", low=low, strict=strict)
+                          for k in names})
+    if "bearing_damping_ratio" in raw:
+        out["bearing_damping_ratio"] = r.number(raw, "bearing_damping_ratio",
+                                                f + "bearing_damping_ratio", low=0.0)
+    return out
+
+
+def _geometry(r: TomlReader, raw, f: str, teeth: Teeth, module, pressure) -> ToothGeometry | None:
     """The tooth geometry, or ``None`` without ``face_width_mm``."""
     others = [k for k in (*_GEOMETRY_DEFAULTS, "profile_shift", "tip_relief") if k in raw]
     if "face_width_mm" not in raw:
@@ -276,7 +309,7 @@ def _geometry(r: _Reader, raw, f: str, teeth: Teeth, module, pressure) -> ToothG
     )
 
 
-def _tip_relief(r: _Reader, raw, f: str, teeth: Teeth, module, pressure):
+def _tip_relief(r: TomlReader, raw, f: str, teeth: Teeth, module, pressure):
     """Relief amount (um) and start diameter (mm) per gear; a start given as a roll
     angle ``xi`` (deg) is the diameter ``d_b sqrt(1 + xi^2)``."""
     table = raw.get("tip_relief", {})
@@ -316,7 +349,7 @@ def with_geometric_stiffness(stage: Stage) -> Stage:
                        (SunRing(sun=c_s, ring=c_r), SunRing(sun=k_s, ring=k_r)))
 
 
-def _transmission_error(r: _Reader, raw, f: str) -> TransmissionError:
+def _transmission_error(r: TomlReader, raw, f: str) -> TransmissionError:
     te = raw.get("transmission_error", {})
     r.table(te, f + "transmission_error")
     r.keys(te, {"sun", "ring"}, f + "transmission_error")
@@ -331,7 +364,7 @@ def _transmission_error(r: _Reader, raw, f: str) -> TransmissionError:
     return TransmissionError(**sides)
 
 
-def _coupling(r: _Reader, raw, i: int) -> Coupling:
+def _coupling(r: TomlReader, raw, i: int) -> Coupling:
     f = f"couplings[{i}]"
     r.table(raw, f)
     r.keys(raw, _COUPLING_KEYS, f)
@@ -356,7 +389,7 @@ def _coupling(r: _Reader, raw, i: int) -> Coupling:
     )
 
 
-def _gear(r: _Reader, name: str, raw) -> Gear:
+def _gear(r: TomlReader, name: str, raw) -> Gear:
     f = f"gears.{name}"
     r.table(raw, f)
     r.keys(raw, _GEAR_KEYS, f)
@@ -392,120 +425,13 @@ def _gear(r: _Reader, name: str, raw) -> Gear:
     )
 
 
-class _Reader:
-    """Typed access to raw TOML values, failing with file, field, value and rule."""
-
-    _MISSING = object()
-
-    def __init__(self, source: str | None):
-        self.source = source
-
-    def fail(self, field: str, value, rule: str):
-        return fail(self.source, field, value, rule)
-
-    def table(self, value, field: str) -> None:
-        if not isinstance(value, dict):
-            raise self.fail(field, value, "must be a table")
-
-    def keys(self, raw: dict, allowed: set[str], field: str) -> None:
-        for key in raw:
-            if key not in allowed:
-                raise self.fail(f"{field} key", key,
-                                f"unknown key; known keys are {', '.join(sorted(allowed))}")
-
-    def sub(self, raw: dict, key: str, field: str, keys: set[str]) -> dict:
-        value = raw.get(key, self._MISSING)
-        if value is self._MISSING:
-            raise self.fail(field, None, "is required")
-        self.table(value, field)
-        self.keys(value, keys, field)
-        return value
-
-    def _get(self, raw: dict, key: str, field: str, default):
-        value = raw.get(key, self._MISSING)
-        if value is self._MISSING:
-            if default is self._MISSING:
-                raise self.fail(field, None, "is required")
-            return default
-        return value
-
-    def number(self, raw, key, field, *, default=_MISSING, low=None, strict=False, rule=None):
-        value = self._get(raw, key, field, default)
-        if not _finite(value):
-            raise self.fail(field, value, "must be a finite number")
-        if low is not None and (value <= low if strict else value < low):
-            raise self.fail(field, value, rule or f"must be {'>' if strict else '>='} {low:g}")
-        return jnp.asarray(float(value))
-
-    def integer(self, raw, key, field, *, default=_MISSING, low=None, rule=None) -> int:
-        value = self._get(raw, key, field, default)
-        if isinstance(value, bool) or not isinstance(value, int):
-            # a type error names the type rule, never the range rule (30.5 teeth is not "< 1")
-            if isinstance(value, float) and value.is_integer():
-                raise self.fail(field, value, "must be an integer (no decimal point)")
-            raise self.fail(field, value, "must be an integer")
-        if low is not None and value < low:
-            raise self.fail(field, value, rule or f"must be >= {low}")
-        return value
-
-    def string(self, raw, key, field, *, default=_MISSING) -> str:
-        value = self._get(raw, key, field, default)
-        if not isinstance(value, str):
-            raise self.fail(field, value, "must be a string")
-        return value
-
-    def choice(self, raw, key, field, options, *, default=_MISSING) -> str:
-        value = self._get(raw, key, field, default)
-        if value not in options:
-            raise self.fail(field, value, f"must be one of {', '.join(map(repr, options))}")
-        return value
-
-    def vector(self, raw, key, field) -> np.ndarray:
-        value = self._get(raw, key, field, self._MISSING)
-        if not isinstance(value, list) or not all(_finite(v) for v in value):
-            raise self.fail(field, value, "must be a list of finite numbers")
-        return np.asarray(value, dtype=np.float64)
-
-    def matrix(self, raw, key, field, columns: int, what: str) -> np.ndarray:
-        value = raw.get(key, [])
-        ok = isinstance(value, list) and all(
-            isinstance(row, list) and len(row) == columns
-            and all(_finite(v) for v in row)
-            for row in value
-        )
-        if not ok:
-            raise self.fail(field, value, f"must be a list of {what}")
-        return np.asarray(value, dtype=np.float64).reshape(len(value), columns)
-
-    def sun_ring(self, raw, key, f, *, low=None, strict=False, default=_MISSING, rule=None):
-        value = self._get(raw, key, f + key, default)
-        if isinstance(value, int | float) and not isinstance(value, bool):
-            value = {"sun": value, "ring": value}  # one number for both sides
-        self.table(value, f + key)
-        self.keys(value, {"sun", "ring"}, f + key)
-        return SunRing(**{
-            side: self.number(value, side, f"{f}{key}.{side}", low=low, strict=strict,
-                              default=default, rule=rule)
-            for side in ("sun", "ring")
-        })
-
-
-def _finite(value) -> bool:
-    """A TOML number that is a finite float64 (not a bool, not an integer too large)."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        return False
-    try:
-        return math.isfinite(float(value))
-    except OverflowError:  # an integer beyond 1.8e308
-        return False
-
-
 # --------------------------------------------------------------------------- writing
 
 def train_to_dict(train: Train) -> dict:
     """The train as a TOML-ready dict (inverse of :func:`train_from_dict`)."""
     out: dict = {
         "name": train.name,
+        "model": train.model,
         "stiffness_harmonics": train.stiffness_harmonics,
         "phasing": train.phasing,
         "mesh_damping": train.mesh_damping,
@@ -537,6 +463,12 @@ def train_to_dict(train: Train) -> dict:
             d["transmission_error"] = te
         d["inertia"] = {k: _f(getattr(s.inertia, k)) for k in ("sun", "ring", "carrier", "planet")}
         d["planet_mass"] = _f(s.planet_mass)
+        for key, names in (("mass", MEMBERS), ("bearing_stiffness", (*MEMBERS, "planet")),
+                           ("base_diameter_mm", _GEARS)):
+            if getattr(s, key) is not None:
+                d[key] = {k: _f(getattr(getattr(s, key), k)) for k in names}
+        if s.bearing_damping_ratio is not None:
+            d["bearing_damping_ratio"] = _f(s.bearing_damping_ratio)
         stages.append(d)
     out["stages"] = stages
     couplings = []

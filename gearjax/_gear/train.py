@@ -19,6 +19,9 @@ from .._errors import bad_argument
 MEMBERS = ("sun", "ring", "carrier")
 """Central members of a stage, in the order of their coordinates."""
 
+MODELS = ("torsional", "translational")
+"""Stage models (model.md): rotations only, or Lin & Parker's translational-rotational."""
+
 
 class Teeth(eqx.Module):
     """Tooth counts of one stage (static integers)."""
@@ -64,6 +67,26 @@ class PerGear(eqx.Module):
     ring: Float[Array, ""]
 
 
+class CentralMass(eqx.Module):
+    """Masses (kg) of a stage's central members, for their translations (translational
+    model; a planet's is ``Stage.planet_mass``)."""
+
+    sun: Float[Array, ""]
+    ring: Float[Array, ""]
+    carrier: Float[Array, ""]
+
+
+class BearingStiffness(eqx.Module):
+    """Bearing stiffness (N/m, the same in each direction) of a stage's sun, ring and
+    carrier bearings and of each planet pin (translational model). 0: the member floats,
+    held only by its meshes."""
+
+    sun: Float[Array, ""]
+    ring: Float[Array, ""]
+    carrier: Float[Array, ""]
+    planet: Float[Array, ""]
+
+
 class TipRelief(eqx.Module):
     """Linear tip relief per gear: ``amount_um`` (um) at the tip, growing linearly in
     roll angle from the diameter ``start_diameter_mm`` (mm) to the tip. An amount of 0
@@ -106,6 +129,10 @@ class Stage(eqx.Module):
     ``None`` unless the file gives ``face_width_mm``; where it derives the stiffness,
     ``contact_ratio`` and ``mesh_stiffness`` hold the geometric values (the unloaded
     mean) for reports, and assembly derives the wave from ``geometry`` itself.
+    ``mass``, ``bearing_stiffness`` and ``bearing_damping_ratio`` (``None`` unless
+    given; the damping ratio then is ``mesh_damping_ratio``) are what the
+    translational model adds; ``base_diameter_mm`` (``None``: from module, teeth and
+    pressure angle) gives published base circles.
     """
 
     id: str = eqx.field(static=True)
@@ -124,6 +151,10 @@ class Stage(eqx.Module):
     inertia: Inertia
     planet_mass: Float[Array, ""]
     geometry: ToothGeometry | None = None
+    mass: CentralMass | None = None
+    bearing_stiffness: BearingStiffness | None = None
+    bearing_damping_ratio: Float[Array, ""] | None = None
+    base_diameter_mm: PerGear | None = None
 
     @property
     def stiffness_from_geometry(self) -> bool:
@@ -143,7 +174,11 @@ class Stage(eqx.Module):
         return self.module_mm * 1e-3 * (self.teeth.sun + self.teeth.planet) / 2
 
     def base_radii(self) -> tuple[Array, Array, Array]:
-        """Base radii (m) of sun, planet, ring: ``m Z cos(alpha) / 2``."""
+        """Base radii (m) of sun, planet, ring: ``base_diameter_mm / 2`` where given,
+        else ``m Z cos(alpha) / 2``."""
+        d = self.base_diameter_mm
+        if d is not None:
+            return d.sun * 5e-4, d.planet * 5e-4, d.ring * 5e-4
         half = self.module_mm * 1e-3 * jnp.cos(jnp.deg2rad(self.pressure_angle_deg)) / 2
         return half * self.teeth.sun, half * self.teeth.planet, half * self.teeth.ring
 
@@ -228,7 +263,8 @@ class Gear(eqx.Module):
 class Train(eqx.Module):
     """A compound planetary train: stages, couplings, housing and gears.
 
-    ``source`` is the file it was read from (for messages), ``None`` if built in code.
+    ``model`` (static, one of :data:`MODELS`) applies to every stage. ``source`` is the
+    file it was read from (for messages), ``None`` if built in code.
     """
 
     name: str = eqx.field(static=True)
@@ -240,6 +276,7 @@ class Train(eqx.Module):
     phasing: str = eqx.field(static=True, default="physical")
     mesh_damping: str = eqx.field(static=True, default="always")
     source: str | None = eqx.field(static=True, default=None)
+    model: str = eqx.field(static=True, default="torsional")
 
     @property
     def stage_ids(self) -> tuple[str, ...]:
@@ -250,9 +287,19 @@ class Train(eqx.Module):
         return tuple(g.name for g in self.gears)
 
     @property
+    def translational(self) -> bool:
+        return self.model == "translational"
+
+    @property
     def n_dof(self) -> int:
-        """``3 d + sum_n N_n``: sun, ring, carrier and planets of every stage."""
-        return sum(3 + s.n_planets for s in self.stages)
+        """Coordinates of every stage (:meth:`stage_dof`)."""
+        return sum(self.stage_dof(s) for s in self.stages)
+
+    def stage_dof(self, stage: Stage) -> int:
+        """A stage's coordinates: ``3 + N`` rotations (sun, ring, carrier, planets),
+        then in the translational model ``6 + 2 N`` translations (``x, y`` of sun, ring
+        and carrier; radial and tangential of each planet)."""
+        return (9 + 3 * stage.n_planets) if self.translational else 3 + stage.n_planets
 
     def stage(self, stage_id: str) -> Stage:
         for s in self.stages:
@@ -281,7 +328,7 @@ def member_index(train: Train, path: str) -> int:
     for s in train.stages:
         if s.id == stage_id:
             return offset + MEMBERS.index(member)
-        offset += 3 + s.n_planets
+        offset += train.stage_dof(s)
     raise KeyError(path)
 
 
@@ -304,7 +351,7 @@ def planet_index(train: Train, stage_id: str, planet: int) -> int:
     for s in train.stages:
         if s.id == stage_id:
             return offset + 3 + planet
-        offset += 3 + s.n_planets
+        offset += train.stage_dof(s)
     raise KeyError(stage_id)
 
 

@@ -21,6 +21,7 @@ from .tooth_rules import tooth_geometry_warnings
 from .._errors import fail, warn_geometry, warn_range
 from .kinematics import kinematics
 from .train import MEMBERS, Train
+from .translational import check_support
 
 
 def validate_train(train: Train, *, emit_warnings: bool = True) -> list[str]:
@@ -42,6 +43,8 @@ def validate_train(train: Train, *, emit_warnings: bool = True) -> list[str]:
 
     for s in train.stages:
         _check_overlap(train, s)
+    if train.translational:
+        check_support(train)
     gears = train.gear_names
     for i, c in enumerate(train.couplings):
         field = f"couplings[{i}]" + (f" (id {c.id!r})" if c.id else "")
