@@ -15,6 +15,8 @@ The functions are pure in the stage's array leaves (``jit``, ``vmap``, ``grad``)
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -96,19 +98,48 @@ def bearing_springs(stage: Stage, offset: int, n: int) -> tuple[list, list, list
 
 def bearing_damping(stage: Stage, offset: int, n: int):
     """Viscous matrix ``(n, n)`` of the stage's bearings: ``c r r^T`` for each bearing
-    row ``r`` of :func:`bearing_springs`, ``c = 2 zeta sqrt(k m)`` with ``m`` the
-    supported mass (the central member's, the planet's for a pin) and ``zeta`` the
-    stage's ``bearing_damping_ratio`` (default its ``mesh_damping_ratio``)."""
+    row ``r`` of :func:`bearing_springs` and its coefficient ``c`` of
+    :func:`bearing_dampers`."""
+    rows, _, _ = bearing_springs(stage, offset, n)
+    C = jnp.zeros((n, n))
+    for row, c in zip(rows, bearing_dampers(stage)):
+        C = C + c * jnp.outer(row, row)
+    return C
+
+
+def bearing_dampers(stage: Stage) -> list:
+    """Viscous coefficient (N s/m) of each row of :func:`bearing_springs`:
+    ``c = 2 zeta sqrt(k m)``, ``m`` the supported mass (the central member's, the
+    planet's for a pin), ``zeta`` the stage's ``bearing_damping_ratio`` (default its
+    ``mesh_damping_ratio``)."""
     zeta = stage.bearing_damping_ratio
     zeta = stage.mesh_damping_ratio if zeta is None else zeta
-    rows, ks, _ = bearing_springs(stage, offset, n)
-    m = stage.mass
-    masses = [m.sun, m.sun, m.ring, m.ring, m.carrier, m.carrier]
-    masses += [stage.planet_mass] * (len(rows) - 6)
-    C = jnp.zeros((n, n))
-    for row, k, mass in zip(rows, ks, masses):
-        C = C + 2 * zeta * jnp.sqrt(k * mass) * jnp.outer(row, row)
-    return C
+    k, m = stage.bearing_stiffness, stage.mass
+    pairs = [(getattr(k, j), getattr(m, j)) for j in MEMBERS for _ in "xy"]
+    pairs += [(k.planet, stage.planet_mass)] * (2 * stage.n_planets)
+    return [2 * zeta * jnp.sqrt(stiffness * mass) for stiffness, mass in pairs]
+
+
+def bearing_table(train) -> dict:
+    """Every bearing of a translational train, for its force outputs: ``names``
+    (``"ID.sun"``, ``"ID.ring"``, ``"ID.carrier"``, ``"ID.pinN"``), ``stages``, ``rows``
+    ``(b, 2, n)`` (its two deflection rows: ``x, y``, or a pin's radial and tangential,
+    :func:`bearing_springs`), ``stiffness`` ``(b,)`` (N/m) and ``damping`` ``(b,)``
+    (N s/m). The force on a bearing is ``k r x + c r x'`` per row."""
+    names, stages, rows, ks, cs = [], [], [], [], []
+    offset, n = 0, train.n_dof
+    for s in train.stages:
+        r, k, row_names = bearing_springs(s, offset, n)
+        c = bearing_dampers(s)
+        for i in range(0, len(r), 2):
+            names.append(row_names[i].rsplit(".", 1)[0])
+            stages.append(s.id)
+            rows.append(np.stack([np.asarray(r[i]), np.asarray(r[i + 1])]))
+            ks.append(float(np.asarray(k[i])))
+            cs.append(float(np.asarray(c[i])))
+        offset += train.stage_dof(s)
+    return {"names": names, "stages": stages, "rows": np.asarray(rows).reshape(-1, 2, n),
+            "stiffness": np.asarray(ks), "damping": np.asarray(cs)}
 
 
 def stage_dof_labels(stage: Stage) -> tuple[list[str], list[str]]:
@@ -155,3 +186,29 @@ def check_support(train) -> None:
                            f"a floating {member} needs two planets whose lines of action are "
                            f"not parallel; planet angles {np.rad2deg(psi).tolist()} hold it "
                            "along one line only")
+
+
+def rigid_rotation_messages(train) -> list[str]:
+    """Stages whose radii let a rigid rotation strain their meshes in this model:
+    ``r_c cos(alpha)`` must equal ``r_s + r_p`` and ``r_r - r_p`` (model.md). Where one
+    differs by more than 0.1% of ``r_c``, the static loads leak torque into the housing
+    springs; each message names the stage, the three lengths and the keys that set them."""
+    out = []
+    where = train.source or train.name
+    for s in train.stages:
+        r_s, r_p, r_r = (float(np.asarray(r)) for r in s.base_radii())
+        r_c = float(np.asarray(s.carrier_radius()))
+        lever = r_c * math.cos(math.radians(float(np.asarray(s.pressure_angle_deg))))
+        off = {side: d for side, d in (("sun", r_s + r_p), ("ring", r_r - r_p))
+               if abs(d - lever) > 1e-3 * r_c}
+        if off:
+            shown = ", ".join(f"{'r_s + r_p' if side == 'sun' else 'r_r - r_p'} = "
+                              f"{d * 1e3:.4g} mm" for side, d in off.items())
+            out.append(
+                f"{where}: stage {s.id!r}: the translational model needs r_c cos(alpha) = "
+                f"r_s + r_p = r_r - r_p, but r_c cos(alpha) = {lever * 1e3:.4g} mm and {shown}: "
+                f"a rigid rotation of the stage strains its {' and '.join(off)} meshes, so "
+                "static loads leak torque into the housing springs (gearjax info shows the "
+                "torque balance); teeth, carrier_radius_mm or base_diameter_mm that satisfy "
+                "it remove the leak")
+    return out

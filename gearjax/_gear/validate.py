@@ -21,7 +21,7 @@ from .tooth_rules import tooth_geometry_warnings
 from .._errors import fail, warn_geometry, warn_range
 from .kinematics import kinematics
 from .train import MEMBERS, Train
-from .translational import check_support
+from .translational import check_support, rigid_rotation_messages
 
 
 def validate_train(train: Train, *, emit_warnings: bool = True) -> list[str]:
@@ -81,7 +81,8 @@ def validate_train(train: Train, *, emit_warnings: bool = True) -> list[str]:
 
 
 def geometry_warnings(train: Train) -> list[str]:
-    """Concentricity and assembly rules of standard gears, with the numbers."""
+    """Concentricity and assembly rules of standard gears, and in the translational
+    model the radii a rigid rotation needs, with the numbers."""
     out = []
     where = train.source or train.name
     for s in train.stages:
@@ -113,6 +114,8 @@ def geometry_warnings(train: Train) -> list[str]:
                 f"break the assembly rule (Z_s + Z_r) psi / 360 = {zs + zr} psi / 360 an "
                 f"integer: planets {shown}{more}"
             )
+    if train.translational:
+        out += rigid_rotation_messages(train)
     return out
 
 

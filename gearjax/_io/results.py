@@ -55,6 +55,7 @@ import xarray as xr
 
 from .._errors import TrainError
 from .._version import __version__
+from .bearing_results import bearings_json
 from .journal import sync_directory
 from .._engine.responses import RESPONSE_FIELDS, RESPONSE_UNITS, MeshResponses
 from .._engine.system import System
@@ -455,8 +456,9 @@ def points_json(ds: xr.Dataset) -> list[dict]:
     where the sweep was completed, ``found`` (how that branch was found), for a
     harmonic-balance sweep ``max_multiplier`` (the largest Floquet multiplier modulus,
     rigid-body modes excluded), and ``meshes``: ``{name, stage, side, planet, mean_force,
-    rms_force, max_force, dlf, separation, back_contact, mean_torque}``. NaN and
-    infinities become ``None``; a mesh with a ``None`` value gets a ``reason``.
+    rms_force, max_force, dlf, separation, back_contact, mean_torque}``; in the
+    translational model ``bearings`` (:func:`~gearjax._io.bearing_results.bearings_json`).
+    NaN and infinities become ``None``; a mesh with a ``None`` value gets a ``reason``.
     """
     names = ds["mesh"].values.tolist()
     stage = ds["stage"].values.tolist()
@@ -497,6 +499,8 @@ def points_json(ds: xr.Dataset) -> list[dict]:
             points[-1]["branch"] = int(ds["branch"].values[k])
             if "found" in ds:
                 points[-1]["found"] = str(ds["found"].values[k])
+        if "bearing_mean_force" in ds:  # the translational model
+            points[-1]["bearings"] = bearings_json(ds, k, json_number)
         if "max_multiplier" in ds:  # a harmonic-balance sweep: its stability's measure
             points[-1]["max_multiplier"] = json_number(ds["max_multiplier"].values[k])
         if "period" in ds and not ds["period"].values[k] > 0:  # 0: no repeat found

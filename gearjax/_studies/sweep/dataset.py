@@ -11,6 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._engine.results import RESULTS, legacy_words, result_word
+from ..._gear.translational import bearing_table
+from ..._io.bearing_results import add_bearing_forces
 from ..._io.results import (add_displacement_harmonics, add_displacement_waves,
                                mesh_coordinates, sweep_dataset)
 from .. import harmonics as _harmonics
@@ -114,6 +116,10 @@ def sweep_result_dataset(data: dict, case, *, F_static, train_toml: str, solver:
         "units": "1", "long_name": "largest Floquet multiplier modulus (rigid-body excluded)"})
     if system.n_angles > 1:
         waves = [_harmonics.torus_basis_of(system, K).orders for K in map(tuple, data["K"])]
-        return add_displacement_waves(ds, data["X"], system.dof_labels, data["K"], waves,
-                                      system.angle_ratio)
-    return add_displacement_harmonics(ds, data["X"], system.dof_labels, data["K"])
+        ds = add_displacement_waves(ds, data["X"], system.dof_labels, data["K"], waves,
+                                    system.angle_ratio)
+    else:
+        ds = add_displacement_harmonics(ds, data["X"], system.dof_labels, data["K"])
+    if case.train.translational:
+        ds = add_bearing_forces(ds, **bearing_table(case.train))
+    return ds
