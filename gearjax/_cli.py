@@ -601,6 +601,7 @@ def _info(args, train, notes) -> int:
             for name, f in loads.mesh_force.items()
         },
         "brake_reactions": loads.brake_reaction,
+        "load_sharing": loads.load_sharing,
         "housing_leak": loads.leak,
         "torque_balance": loads.balance,
         "phasing": phasing,
@@ -629,6 +630,9 @@ def _info(args, train, notes) -> int:
         print(f"brake {path} reacts {t:.2f} N m")
     print(f"through the free housing springs: {loads.leak:.3g} N m; "
           f"torque balance residual {loads.balance:.2g} N m")
+    print("static load-sharing factor (largest planet load / mean): " + ", ".join(
+        f"stage {sid} {v:.4f}" if v is not None else f"stage {sid} unloaded"
+        for sid, v in loads.load_sharing.items()))
     for sid, rows in phasing.items():
         if rows:
             print(f"\nstage {sid} stiffness phasing (Parker & Lin, k = h Z_s mod N):")

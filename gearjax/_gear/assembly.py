@@ -135,6 +135,8 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
 
     spring_rows, spring_k, spring_class = _springs(train, g, n)
     f_mean, f_cos, f_sin = _forcing(train, g, kin, n)
+    for s, offset in zip(train.stages, train.stage_offsets()) if train.translational else ():
+        f_mean = f_mean + translational.pin_error_forcing(s, offset, n)
     stack = lambda xs, cols: jnp.stack(xs) if xs else jnp.zeros((0, cols))  # noqa: E731
     return System(
         M=M,
@@ -184,13 +186,11 @@ def _springs(train: Train, g, n: int):
                     .at[member_index(train, c.members[1])].set(-1.0))
         ks.append(c.stiffness)
         classes.append("penalty" if _at_least(c.stiffness, train.housing.braked) else "elastic")
-    offset = 0
-    for s in train.stages if train.translational else ():
+    for s, offset in zip(train.stages, train.stage_offsets()) if train.translational else ():
         b_rows, b_ks, _ = translational.bearing_springs(s, offset, n)
         rows += b_rows
         ks += b_ks
         classes += ["elastic"] * len(b_rows)
-        offset += train.stage_dof(s)
     return jnp.stack(rows), jnp.stack(ks), tuple(classes)
 
 
@@ -205,10 +205,8 @@ def _dampers(train: Train, g, n: int):
         i, j = (member_index(train, m) for m in c.members)
         coef = c.viscous_damping(*(member_inertia(train, m) for m in c.members))
         C = C.at[i, i].add(coef).at[j, j].add(coef).at[i, j].add(-coef).at[j, i].add(-coef)
-    offset = 0
-    for s in train.stages if train.translational else ():
+    for s, offset in zip(train.stages, train.stage_offsets()) if train.translational else ():
         C = C + translational.bearing_damping(s, offset, n)
-        offset += train.stage_dof(s)
     return C
 
 

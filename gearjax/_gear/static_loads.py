@@ -15,7 +15,9 @@ from .._engine.hb import HarmonicBalance
 from .._engine.static import static_deflection
 from .._engine.system import System
 from .._errors import field_message, warn_range
+from .load_sharing import load_sharing
 from .train import Train, member_index, member_paths
+from .translational import pin_error_forcing
 
 FLOAT_RESOLUTION = HarmonicBalance().rtol
 """Share of its backlash below which a mesh's static deflection is no load: the
@@ -56,7 +58,8 @@ class StaticLoads:
     spring exerts on it (brake reactions and leaks through the free springs);
     ``brake_reaction``: braked member -> reaction (N m); ``leak``: total torque through
     the free housing springs; ``balance``: sum of external and housing torques (should
-    be ~0); ``coordinates``: label -> static rotation (rad).
+    be ~0); ``coordinates``: label -> static rotation (rad) or translation (m);
+    ``load_sharing``: stage -> static load-sharing factor (:mod:`.load_sharing`).
     """
 
     gear: str
@@ -68,6 +71,7 @@ class StaticLoads:
     leak: float
     balance: float
     coordinates: dict[str, float]
+    load_sharing: dict[str, float | None]
 
 
 def static_loads(train: Train, gear: str | None = None) -> StaticLoads:
@@ -82,7 +86,9 @@ def static_loads(train: Train, gear: str | None = None) -> StaticLoads:
                                  float(g.input_torque), reason))
     mesh_force = dict(zip(system.mesh_labels, F.tolist()))
     mesh_torque = dict(zip(system.mesh_labels, (np.asarray(system.mesh_radius) * F).tolist()))
-    f = np.asarray(system.f_mean)
+    f = np.asarray(system.f_mean)  # less the pins' internal error forces, if any
+    for s, offset in zip(train.stages, train.stage_offsets()) if train.translational else ():
+        f = f - np.asarray(pin_error_forcing(s, offset, train.n_dof))
     external, housing, brakes = {}, {}, {}
     leak = 0.0
     for path in member_paths(train):
@@ -106,4 +112,5 @@ def static_loads(train: Train, gear: str | None = None) -> StaticLoads:
         leak=float(leak),
         balance=float(balance),
         coordinates=dict(zip(system.dof_labels, x.tolist())),
+        load_sharing=load_sharing(system, F),
     )

@@ -26,6 +26,7 @@ from .train import (
     BearingStiffness,
     CentralMass,
     Coupling,
+    PlanetErrors,
     Gear,
     Housing,
     Inertia,
@@ -52,7 +53,7 @@ _STAGE_KEYS = {"id", "teeth", "module_mm", "pressure_angle_deg", "planet_angles_
                "carrier_radius_mm", "contact_ratio", "mesh_stiffness", "mesh_damping_ratio",
                "half_backlash", "sun_ring_phase_deg", "stage_phase_deg", "transmission_error",
                "inertia", "planet_mass", "mass", "bearing_stiffness", "bearing_damping_ratio",
-               "base_diameter_mm",
+               "base_diameter_mm", "planet_position_error_um",
                *("face_width_mm", "profile_shift",
                "addendum_coefficient", "dedendum_coefficient", "root_radius_coefficient",
                "youngs_modulus", "poisson_ratio", "tip_relief")}
@@ -267,7 +268,29 @@ def _translational_keys(r: TomlReader, raw, f: str, model: str) -> dict:
     if "bearing_damping_ratio" in raw:
         out["bearing_damping_ratio"] = r.number(raw, "bearing_damping_ratio",
                                                 f + "bearing_damping_ratio", low=0.0)
+    if "planet_position_error_um" in raw:
+        out["planet_position_error_um"] = _planet_errors(r, raw, f, model)
     return out
+
+
+def _planet_errors(r: TomlReader, raw, f: str, model: str) -> PlanetErrors:
+    """``planet_position_error_um = { tangential = [...], radial = [...] }``: one number
+    per planet each (um), a missing list all zeros; the translational model only."""
+    key = f + "planet_position_error_um"
+    table = r.sub(raw, "planet_position_error_um", key, {"tangential", "radial"})
+    n = len(raw.get("planet_angles_deg", []))
+    lists = {}
+    for d in ("tangential", "radial"):
+        v = r.vector(table, d, f"{key}.{d}") if d in table else np.zeros(n)
+        if v.size != n:
+            raise r.fail(f"{key}.{d}", v.tolist(),
+                         f"needs one error per planet ({n}, as planet_angles_deg)")
+        lists[d] = jnp.asarray(v)
+    if model != "translational" and any(np.any(np.asarray(v) != 0) for v in lists.values()):
+        raise r.fail(key, {d: np.asarray(v).tolist() for d, v in lists.items()},
+                     'pin position errors need model = "translational" (its pins carry '
+                     "them); the torsional model does not take them")
+    return PlanetErrors(**lists)
 
 
 def _geometry(r: TomlReader, raw, f: str, teeth: Teeth, module, pressure) -> ToothGeometry | None:
@@ -469,6 +492,10 @@ def train_to_dict(train: Train) -> dict:
                 d[key] = {k: _f(getattr(getattr(s, key), k)) for k in names}
         if s.bearing_damping_ratio is not None:
             d["bearing_damping_ratio"] = _f(s.bearing_damping_ratio)
+        if s.planet_position_error_um is not None:
+            d["planet_position_error_um"] = {
+                k: [_f(v) for v in np.asarray(getattr(s.planet_position_error_um, k))]
+                for k in ("tangential", "radial")}
         stages.append(d)
     out["stages"] = stages
     couplings = []

@@ -87,6 +87,15 @@ class BearingStiffness(eqx.Module):
     planet: Float[Array, ""]
 
 
+class PlanetErrors(eqx.Module):
+    """Pin position errors (um) of a stage's planets, one per planet in file order:
+    ``tangential`` (along the carrier's positive rotation) and ``radial`` (outward)
+    displacement of each pin from its nominal place (translational model)."""
+
+    tangential: Float[Array, " N"]
+    radial: Float[Array, " N"]
+
+
 class TipRelief(eqx.Module):
     """Linear tip relief per gear: ``amount_um`` (um) at the tip, growing linearly in
     roll angle from the diameter ``start_diameter_mm`` (mm) to the tip. An amount of 0
@@ -154,6 +163,7 @@ class Stage(eqx.Module):
     mass: CentralMass | None = None
     bearing_stiffness: BearingStiffness | None = None
     bearing_damping_ratio: Float[Array, ""] | None = None
+    planet_position_error_um: PlanetErrors | None = None
     base_diameter_mm: PerGear | None = None
 
     @property
@@ -300,6 +310,11 @@ class Train(eqx.Module):
         then in the translational model ``6 + 2 N`` translations (``x, y`` of sun, ring
         and carrier; radial and tangential of each planet)."""
         return (9 + 3 * stage.n_planets) if self.translational else 3 + stage.n_planets
+
+    def stage_offsets(self) -> tuple[int, ...]:
+        """Index of each stage's first coordinate (its sun's rotation)."""
+        sizes = [self.stage_dof(s) for s in self.stages]
+        return tuple(sum(sizes[:i]) for i in range(len(sizes)))
 
     def stage(self, stage_id: str) -> Stage:
         for s in self.stages:

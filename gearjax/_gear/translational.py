@@ -96,6 +96,32 @@ def bearing_springs(stage: Stage, offset: int, n: int) -> tuple[list, list, list
     return rows, ks, names
 
 
+def bearing_offsets(stage: Stage) -> list:
+    """Rest offset (m) of each row of :func:`bearing_springs`: 0 for sun, ring and
+    carrier; a pin's radial and tangential position error
+    (``planet_position_error_um``). A bearing's deflection is ``r x + e``: a pin moved
+    out by ``e_r`` holds its planet at ``zeta = e_r``, one moved ahead by ``e_t`` at
+    ``eta = r_c theta_c + e_t``."""
+    out = [jnp.asarray(0.0)] * 6
+    errors = stage.planet_position_error_um
+    for i in range(stage.n_planets):
+        if errors is None:
+            out += [jnp.asarray(0.0)] * 2
+        else:
+            out += [errors.radial[i] * 1e-6, errors.tangential[i] * 1e-6]
+    return out
+
+
+def pin_error_forcing(stage: Stage, offset: int, n: int):
+    """Generalised force ``(n,)`` of the pin errors: ``-sum k e r`` over the bearing
+    rows (the springs' energy ``k (r x + e)^2 / 2``), added to the mean forcing."""
+    rows, ks, _ = bearing_springs(stage, offset, n)
+    f = jnp.zeros(n)
+    for row, k, e in zip(rows, ks, bearing_offsets(stage)):
+        f = f - k * e * row
+    return f
+
+
 def bearing_damping(stage: Stage, offset: int, n: int):
     """Viscous matrix ``(n, n)`` of the stage's bearings: ``c r r^T`` for each bearing
     row ``r`` of :func:`bearing_springs` and its coefficient ``c`` of
@@ -124,22 +150,25 @@ def bearing_table(train) -> dict:
     """Every bearing of a translational train, for its force outputs: ``names``
     (``"ID.sun"``, ``"ID.ring"``, ``"ID.carrier"``, ``"ID.pinN"``), ``stages``, ``rows``
     ``(b, 2, n)`` (its two deflection rows: ``x, y``, or a pin's radial and tangential,
-    :func:`bearing_springs`), ``stiffness`` ``(b,)`` (N/m) and ``damping`` ``(b,)``
-    (N s/m). The force on a bearing is ``k r x + c r x'`` per row."""
-    names, stages, rows, ks, cs = [], [], [], [], []
-    offset, n = 0, train.n_dof
-    for s in train.stages:
+    :func:`bearing_springs`), ``offsets`` ``(b, 2)`` (m, :func:`bearing_offsets`),
+    ``stiffness`` ``(b,)`` (N/m) and ``damping`` ``(b,)`` (N s/m). The force on a
+    bearing is ``k (r x + e) + c r x'`` per row."""
+    names, stages, rows, offsets, ks, cs = [], [], [], [], [], []
+    n = train.n_dof
+    for s, offset in zip(train.stages, train.stage_offsets()):
         r, k, row_names = bearing_springs(s, offset, n)
         c = bearing_dampers(s)
+        e = [float(np.asarray(v)) for v in bearing_offsets(s)]
         for i in range(0, len(r), 2):
+            offsets.append([e[i], e[i + 1]])
             names.append(row_names[i].rsplit(".", 1)[0])
             stages.append(s.id)
             rows.append(np.stack([np.asarray(r[i]), np.asarray(r[i + 1])]))
             ks.append(float(np.asarray(k[i])))
             cs.append(float(np.asarray(c[i])))
-        offset += train.stage_dof(s)
     return {"names": names, "stages": stages, "rows": np.asarray(rows).reshape(-1, 2, n),
-            "stiffness": np.asarray(ks), "damping": np.asarray(cs)}
+            "offsets": np.asarray(offsets).reshape(-1, 2), "stiffness": np.asarray(ks),
+            "damping": np.asarray(cs)}
 
 
 def stage_dof_labels(stage: Stage) -> tuple[list[str], list[str]]:

@@ -29,17 +29,18 @@ _NAMES = {"mean_force": "magnitude of the mean bearing force vector",
 
 
 def add_bearing_forces(ds: xr.Dataset, names: Sequence[str], stages: Sequence[str], rows,
-                       stiffness, damping) -> xr.Dataset:
+                       offsets, stiffness, damping) -> xr.Dataset:
     """``ds`` with ``bearing_mean_force``, ``bearing_rms_force``, ``bearing_max_force``
     ``(point, bearing)`` (N) and the coordinates ``bearing`` (``names``) and
     ``bearing_stage``.
 
     **Arguments:** ``rows`` ``(b, 2, n)``: each bearing's two deflection rows over the
-    ``n`` coordinates of ``ds``'s ``dof``; ``stiffness``, ``damping`` ``(b,)`` (N/m,
-    N s/m). ``ds`` needs ``omega`` and the displacement coefficients (``harmonic`` with
+    ``n`` coordinates of ``ds``'s ``dof``, ``offsets`` ``(b, 2)`` their rest offsets (m:
+    the deflection is ``r x + e``); ``stiffness``, ``damping`` ``(b,)`` (N/m, N s/m). ``ds`` needs ``omega`` and the displacement coefficients (``harmonic`` with
     ``eta``, or ``wave`` with ``wave_vector`` and ``wave_frequency``).
     """
     rows = np.asarray(rows, dtype=float)
+    e = np.asarray(offsets, dtype=float)
     k = np.asarray(stiffness, dtype=float)[:, None, None]
     c = np.asarray(damping, dtype=float)[:, None, None]
     cos = np.asarray(ds["displacement_cos"].values, dtype=float)  # (P, n, W)
@@ -64,11 +65,12 @@ def add_bearing_forces(ds: xr.Dataset, names: Sequence[str], stages: Sequence[st
         w = omega[p] * rates[p][None, None, :]
         fc = k * a + c * w * b
         fs = k * b - c * w * a
-        mean = fc[:, :, 0]
+        mean = fc[:, :, 0] + k[:, :, 0] * e
         out["mean_force"][p] = np.linalg.norm(mean, axis=1)
         out["rms_force"][p] = np.sqrt(0.5 * np.sum(fc[:, :, 1:] ** 2 + fs[:, :, 1:] ** 2,
                                                    axis=(1, 2)))
-        F = np.einsum("bdw,tw->bdt", fc, cos_t) + np.einsum("bdw,tw->bdt", fs, sin_t)
+        F = (np.einsum("bdw,tw->bdt", fc, cos_t) + np.einsum("bdw,tw->bdt", fs, sin_t)
+             + (k[:, :, 0] * e)[:, :, None])
         out["max_force"][p] = np.linalg.norm(F, axis=1).max(axis=1)
     ds = ds.assign_coords(bearing=("bearing", np.asarray(list(names), dtype=str)),
                           bearing_stage=("bearing", np.asarray(list(stages), dtype=str)))

@@ -444,6 +444,8 @@ def results_frame(ds: xr.Dataset) -> pd.DataFrame:
         cols["static_force"] = ds["static_force"].values[mesh]
     for name in RESPONSE_FIELDS:
         cols[name] = ds[name].values.reshape(-1)
+    if "load_sharing" in ds:  # the mesh's stage's factor
+        cols["load_sharing"] = ds["load_sharing"].values[point, own_stage[mesh]]
     return pd.DataFrame(cols)
 
 
@@ -457,7 +459,8 @@ def points_json(ds: xr.Dataset) -> list[dict]:
     harmonic-balance sweep ``max_multiplier`` (the largest Floquet multiplier modulus,
     rigid-body modes excluded), and ``meshes``: ``{name, stage, side, planet, mean_force,
     rms_force, max_force, dlf, separation, back_contact, mean_torque}``; in the
-    translational model ``bearings`` (:func:`~gearjax._io.bearing_results.bearings_json`).
+    translational model ``bearings`` (:func:`~gearjax._io.bearing_results.bearings_json`);
+    for a sweep ``load_sharing`` (stage id -> dynamic load-sharing factor).
     NaN and infinities become ``None``; a mesh with a ``None`` value gets a ``reason``.
     """
     names = ds["mesh"].values.tolist()
@@ -499,6 +502,9 @@ def points_json(ds: xr.Dataset) -> list[dict]:
             points[-1]["branch"] = int(ds["branch"].values[k])
             if "found" in ds:
                 points[-1]["found"] = str(ds["found"].values[k])
+        if "load_sharing" in ds:
+            points[-1]["load_sharing"] = dict(zip(
+                ds["stage_id"].values.tolist(), map(json_number, ds["load_sharing"].values[k])))
         if "bearing_mean_force" in ds:  # the translational model
             points[-1]["bearings"] = bearings_json(ds, k, json_number)
         if "max_multiplier" in ds:  # a harmonic-balance sweep: its stability's measure

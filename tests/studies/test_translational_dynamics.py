@@ -80,6 +80,7 @@ def test_equally_spaced_in_phase_planets_leave_the_central_bearings_unloaded(hel
     the planets' forces on sun, ring and carrier cancel at every harmonic (Parker & Lin
     phasing): their bearing forces are round-off beside the pins'."""
     _, ds = helicopter
+    np.testing.assert_allclose(ds["load_sharing"].values, 1.0, rtol=1e-9)
     pins = float(ds["bearing_rms_force"].sel(bearing="main.pin1").min())
     for member in ("main.sun", "main.ring", "main.carrier"):
         for field in ("mean_force", "rms_force", "max_force"):
@@ -100,6 +101,7 @@ def test_unequal_spacing_loads_the_sun_bearing_by_the_mesh_resultant(unequal):
     assert np.all(sun > 1.0)
     peak = ds["bearing_max_force"].sel(bearing=f"{s.id}.sun").values
     assert np.all(peak >= sun)  # |mean F| <= mean |F| <= max |F|
+    assert np.all(ds["load_sharing"].values > 1.0)
 
 
 def test_points_json_carries_the_bearings(helicopter):
@@ -110,6 +112,7 @@ def test_points_json_carries_the_bearings(helicopter):
                                                                 for n in range(1, 6)]
     assert set(point["bearings"][3]) == {"name", "stage", "mean_force", "rms_force",
                                          "max_force"}
+    assert point["load_sharing"]["main"] == pytest.approx(1.0)
 
 
 @pytest.mark.slow

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._engine.results import RESULTS, legacy_words, result_word
+from ..._gear.load_sharing import stage_load_sharing
 from ..._gear.translational import bearing_table
 from ..._io.bearing_results import add_bearing_forces
 from ..._io.results import (add_displacement_harmonics, add_displacement_waves,
@@ -112,6 +113,10 @@ def sweep_result_dataset(data: dict, case, *, F_static, train_toml: str, solver:
                         "long_name": "how the point's branch was found: sweep, restart, far "
                                      "end, jump up, jump down, integration up or down, "
                                      "period doubling"})
+    _, sharing = stage_load_sharing(system, ds["max_force"].values)
+    ds["load_sharing"] = (("point", "stage_id"), sharing.T, {
+        "units": "1", "long_name": "dynamic load-sharing factor: the largest planet's peak "
+                                   "sun-mesh force over the mean of its planets' peaks"})
     ds["max_multiplier"] = ("point", data["max_multiplier"], {
         "units": "1", "long_name": "largest Floquet multiplier modulus (rigid-body excluded)"})
     if system.n_angles > 1:

@@ -1,0 +1,104 @@
+"""Load sharing among planets with pin position errors (translational model): the
+static results of Kahraman (1994, Mech. Mach. Theory 29, 1151-1165) that follow from
+the force balance alone, against closed forms.
+
+With rigid bearings and one stage (sun driven, ring braked), planet ``i``'s sun-mesh
+deflection is ``d_si = D - e_i cos(alpha)`` plus the ring mesh's share: its moment
+balance gives ``k_s d_si = k_r d_ri``, so
+
+    F_si = sum_j F_sj / N + 2 k_eff cos(alpha) (mean(e) - e_i),
+    k_eff = k_s k_r / (k_s + k_r),
+
+``e_i`` the tangential pin error. A floating sun of a three-planet stage (two more
+freedoms for three loads that must sum to the torque) shares exactly.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gearjax import TrainError, loads_train, static_loads
+from train_refusals import mutate, refuse
+
+DATA = Path(__file__).parent.parent / "data"
+HELICOPTER = (DATA / "helicopter_five_planets.toml").read_text()
+RIGID = 1e15
+"""Bearing stiffness (N/m) of the rigid limit: 1e6 times the meshes'."""
+
+
+def _stage(angles, errors_um, sun_bearing=RIGID, model="translational"):
+    def change(raw):
+        raw["model"] = model
+        s = raw["stages"][0]
+        s["planet_angles_deg"] = list(angles)
+        s["mass"] = {"sun": 2.1, "ring": 9.0, "carrier": 12.0}
+        s["bearing_stiffness"] = {"sun": sun_bearing, "ring": RIGID, "carrier": RIGID,
+                                  "planet": RIGID}
+        s["planet_position_error_um"] = {"tangential": list(errors_um)}
+    return mutate(HELICOPTER, change)
+
+
+def _load(text):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # assembly rule at 120 / 90 degrees
+        return loads_train(text, source="bad.toml")
+
+
+def _sun_forces(train):
+    loads = static_loads(train)
+    sid = train.stages[0].id
+    n = train.stages[0].n_planets
+    return np.array([loads.mesh_force[f"{sid}.sp{i + 1}"] for i in range(n)]), loads
+
+
+def test_equal_spacing_without_errors_shares_equally():
+    """Equal to round-off: bearings 1e6 times stiffer than the meshes leave about
+    1e-16 * 1e6 * (the static solve's other scales) of relative error, 1e-8 here."""
+    forces, loads = _sun_forces(_load(_stage([0, 72, 144, 216, 288], [0.0] * 5)))
+    np.testing.assert_allclose(forces, forces.mean(), rtol=1e-7)
+    assert loads.load_sharing["main"] == pytest.approx(1.0, abs=1e-7)
+
+
+def test_a_tangential_pin_error_loads_the_planets_as_the_static_equations_give():
+    errors = [25.0, 0.0, 0.0]
+    train = _load(_stage([0, 120, 240], errors))
+    forces, loads = _sun_forces(train)
+    s = train.stages[0]
+    k_s, k_r = float(s.mesh_stiffness.sun), float(s.mesh_stiffness.ring)
+    k_eff = k_s * k_r / (k_s + k_r)
+    cos_a = np.cos(np.deg2rad(float(s.pressure_angle_deg)))
+    e = np.asarray(errors) * 1e-6
+    expected = forces.mean() + 2 * k_eff * cos_a * (e.mean() - e)
+    np.testing.assert_allclose(forces, expected, rtol=1e-5)
+    assert loads.load_sharing["main"] == pytest.approx(forces.max() / forces.mean())
+    assert loads.load_sharing["main"] > 1.1
+    assert abs(loads.balance) < 1e-6 * abs(float(train.gears[0].input_torque))
+
+
+def test_a_floating_sun_equalises_three_planets():
+    train = _load(_stage([0, 120, 240], [25.0, 0.0, 0.0], sun_bearing=0.0))
+    forces, loads = _sun_forces(train)
+    np.testing.assert_allclose(forces, forces.mean(), rtol=1e-6)
+    assert loads.load_sharing["main"] == pytest.approx(1.0, abs=1e-6)
+
+
+def test_a_floating_sun_lowers_the_load_sharing_factor_of_four_planets():
+    fixed = static_loads(_load(_stage([0, 90, 180, 270], [25.0, 0, 0, 0]))).load_sharing
+    floating = static_loads(_load(_stage([0, 90, 180, 270], [25.0, 0, 0, 0],
+                                         sun_bearing=0.0))).load_sharing
+    assert 1.0 < floating["main"] < fixed["main"]
+
+
+def test_pin_errors_need_the_translational_model():
+    text = _stage([0, 72, 144, 216, 288], [10.0, 0, 0, 0, 0], model="torsional")
+    refuse(_load, text, "main.planet_position_error_um", "10.0", "translational")
+
+
+def test_one_error_per_planet():
+    text = _stage([0, 72, 144, 216, 288], [10.0, 0.0])
+    with pytest.raises(TrainError, match="one error per planet"):
+        _load(text)
