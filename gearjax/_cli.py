@@ -775,7 +775,7 @@ def _modes(args, train, notes) -> int:
         "repeated_rtol": REPEATED_RTOL,
         "modes": [
             {"hz": m.hz, "multiplicity": m.multiplicity, "class": m.cls, "family": m.family,
-             "stage": m.stage, "shape": m.shape, "energy": m.energy}
+             "stage": m.stage, "shape": m.shape, "energy": m.energy, "kinetic": m.kinetic}
             for m in result.modes
         ],
         "warnings": notes,
@@ -789,12 +789,13 @@ def _modes(args, train, notes) -> int:
         return _emit(out)
     print(f"{train.name}: gear {g.name!r}, {len(result.modes)} modes "
           f"(repeated when within {REPEATED_RTOL:g} relative)")
-    print(f"{'kHz':>10} {'mult':>4} {'class':>8} {'family':>14}  largest coordinates")
+    print(f"{'kHz':>10} {'mult':>4} {'class':>8} {'family':>14}  "
+          "coordinates with most kinetic energy (share)")
     for m in result.modes:
         fam = f"planet {m.stage}" if m.family == "planet" else m.family
-        top = sorted(m.shape.items(), key=lambda kv: -abs(kv[1]))[:3]
+        top = sorted(m.kinetic.items(), key=lambda kv: -abs(kv[1]))[:3]
         print(f"{m.hz / 1e3:>10.4f} {m.multiplicity:>4} {m.cls:>8} {fam:>14}  "
-              + ", ".join(f"{k} {v:+.2f}" for k, v in top))
+              + ", ".join(f"{k} {v:.0%}" for k, v in top))
     if args.plot:
         print(f"mode shapes written to {args.plot}")
     return EXIT_OK

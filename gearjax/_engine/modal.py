@@ -62,8 +62,10 @@ def _generalized_eigh(K, M):
 @dataclasses.dataclass(frozen=True)
 class Mode:
     """One mode. ``shape``: coordinate label -> amplitude, largest magnitude 1 (positive);
-    ``energy``: share of strain energy per spring class and ``mesh``; ``multiplicity``:
-    size of the group of repeated frequencies it belongs to."""
+    ``energy``: share of strain energy per spring class and ``mesh``; ``kinetic``:
+    coordinate label -> share of the kinetic energy, ``v_i (M v)_i / v^T M v`` (sums to
+    1; comparable across rotations and translations, unlike amplitudes in rad and m);
+    ``multiplicity``: size of the group of repeated frequencies it belongs to."""
 
     hz: float
     multiplicity: int
@@ -72,6 +74,7 @@ class Mode:
     stage: str | None
     shape: dict[str, float]
     energy: dict[str, float]
+    kinetic: dict[str, float]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -127,6 +130,7 @@ def modes(system: System) -> ModalResult:
                                       for a in mode_classes(system))
     hz = np.sqrt(np.clip(lam, 0.0, None)) / (2 * np.pi)
     groups = _repeated_groups(hz)
+    M = np.asarray(system.M)
     out = []
     for k in range(len(hz)):
         cls = "rigid" if rigid[k] else "penalty" if penalty[k] else "elastic"
@@ -137,8 +141,15 @@ def modes(system: System) -> ModalResult:
         out.append(Mode(hz=float(hz[k]), multiplicity=groups[k], cls=cls, family=family,
                         stage=stage, shape=dict(zip(system.dof_labels, np.where(
                             np.abs(v) < 1e-12, 0.0, v).tolist())),
-                        energy={c: float(e[k]) for c, e in shares.items()}))
+                        energy={c: float(e[k]) for c, e in shares.items()},
+                        kinetic=dict(zip(system.dof_labels, _kinetic_shares(M, V[:, k])))))
     return ModalResult(modes=tuple(out))
+
+
+def _kinetic_shares(M: np.ndarray, v: np.ndarray) -> list[float]:
+    """``v_i (M v)_i / v^T M v`` per coordinate, round-off below 1e-12 set to 0."""
+    share = v * (M @ v) / (v @ M @ v)
+    return np.where(np.abs(share) < 1e-12, 0.0, share).tolist()
 
 
 def _repeated_groups(hz: np.ndarray) -> list[int]:

@@ -72,6 +72,28 @@ def add_bearing_forces(ds: xr.Dataset, names: Sequence[str], stages: Sequence[st
         F = (np.einsum("bdw,tw->bdt", fc, cos_t) + np.einsum("bdw,tw->bdt", fs, sin_t)
              + (k[:, :, 0] * e)[:, :, None])
         out["max_force"][p] = np.linalg.norm(F, axis=1).max(axis=1)
+    return _assign(ds, names, stages, out)
+
+
+def add_bearing_samples(ds: xr.Dataset, names: Sequence[str], stages: Sequence[str], rows,
+                        offsets, stiffness, damping, x, v) -> xr.Dataset:
+    """:func:`add_bearing_forces` from time samples instead of harmonics (a time
+    integration's last periods): ``x``, ``v`` ``(P, n, T)`` coordinates and rates,
+    uniform over whole periods; NaN where ``x`` is (a failed point)."""
+    rows = np.asarray(rows, dtype=float)
+    k = np.asarray(stiffness, dtype=float)[:, None, None]
+    c = np.asarray(damping, dtype=float)[:, None, None]
+    e = np.asarray(offsets, dtype=float)[:, :, None]
+    F = (k * (np.einsum("bdn,pnt->pbdt", rows, np.asarray(x, float)) + e)
+         + c * np.einsum("bdn,pnt->pbdt", rows, np.asarray(v, float)))
+    mean = F.mean(axis=3)
+    out = {"mean_force": np.linalg.norm(mean, axis=2),
+           "rms_force": np.sqrt(np.mean(np.sum((F - mean[..., None]) ** 2, axis=2), axis=2)),
+           "max_force": np.linalg.norm(F, axis=2).max(axis=2)}
+    return _assign(ds, names, stages, out)
+
+
+def _assign(ds: xr.Dataset, names, stages, out: dict) -> xr.Dataset:
     ds = ds.assign_coords(bearing=("bearing", np.asarray(list(names), dtype=str)),
                           bearing_stage=("bearing", np.asarray(list(stages), dtype=str)))
     for field in BEARING_FIELDS:

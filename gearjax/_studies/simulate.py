@@ -52,10 +52,12 @@ from .._engine import windowed as wd
 from .._errors import bad_argument, fail
 from .._engine.responses import responses_from_samples
 from .._engine.results import result_word
+from .._io.bearing_results import add_bearing_samples
 from .._io.results import sweep_dataset
 from .._engine.system import System
 from .._gear.case import GearCase, gear_case, torus_fields
 from .._gear.toml_io import dumps_train
+from .._gear.translational import bearing_table
 from .._gear.train import Train
 from .validity import warn_contact_loss
 
@@ -184,6 +186,10 @@ def trajectory_dataset(case: GearCase, f_hz, tr: td.Trajectory, solver: dict | N
         solver=solver,
         attrs={"reference_stage": case.stage, **(attrs or {})},
     )
+    if case.train.translational:
+        x = np.where(failed[:, None, None], np.nan, np.asarray(tr.x))
+        v = np.where(failed[:, None, None], np.nan, np.asarray(tr.v))
+        ds = add_bearing_samples(ds, **bearing_table(case.train), x=x, v=v)
     for name, value, long_name in (
             ("periods", tr.periods, "base periods integrated"),
             ("num_steps", tr.stats["num_steps"], "accepted solver steps"),

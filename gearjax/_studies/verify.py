@@ -61,7 +61,8 @@ from .._engine import hb as _hb
 from .._engine import time_domain as td
 from .._engine.results import RESULTS, result_word
 from .._errors import bad_argument
-from .._io.results import json_number, sweep_dataset
+from .._io.bearing_results import add_bearing_forces
+from .._io.results import add_displacement_harmonics, json_number, sweep_dataset
 from .._gear.case import GearCase, gear_case
 from .._engine import windowed as wd
 from .._gear.case import torus_fields
@@ -72,6 +73,7 @@ from .validity import warn_contact_loss
 from .sweep import backlash_start, newton, point_rows, resize_harmonics, solve_points, start_point
 from .._gear.toml_io import dumps_train
 from .._gear.train import Train
+from .._gear.translational import bearing_table
 
 TOL_LINEAR, TOL_NONLINEAR = 0.01, 0.02
 """Default tolerances on ``rel_diff`` without and with backlash."""
@@ -247,8 +249,9 @@ def _hb_dataset(case: GearCase, f_hz, hb: dict, solver: dict, seconds: float,
                 common: dict):
     """The harmonic-balance side of a verification as a sweep dataset: the points of
     ``hb`` (:func:`harmonic_balance_points`) at ``f_hz``, with ``solver`` and ``common``
-    attributes and the time ``seconds`` it took."""
-    return sweep_dataset(
+    attributes and the time ``seconds`` it took; on a periodic translational gear also
+    the displacement harmonics and the bearing forces they give."""
+    ds = sweep_dataset(
         hb["responses"], **case.point_coordinates(f_hz),
         result=list(hb["result"]),
         stable=hb["stable"],
@@ -258,6 +261,12 @@ def _hb_dataset(case: GearCase, f_hz, hb: dict, solver: dict, seconds: float,
         solver=solver,
         attrs={"reference_stage": case.stage, "seconds": seconds, **common},
     )
+    if case.train.translational and case.system.n_angles == 1:
+        K = np.asarray(hb["harmonics"], dtype=int)
+        X = [np.asarray(Xp)[:2 * k + 1] for Xp, k in zip(hb["X"], K)]
+        ds = add_displacement_harmonics(ds, X, case.system.dof_labels, K)
+        ds = add_bearing_forces(ds, **bearing_table(case.train))
+    return ds
 
 
 def window_reference(solver: dict) -> dict:
