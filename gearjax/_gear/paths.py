@@ -15,6 +15,10 @@ A path names one scalar leaf of a :class:`Train` with the train-file keys
   coefficients ``addendum_coefficient``, ``dedendum_coefficient``,
   ``root_radius_coefficient``, ``youngs_modulus``, ``poisson_ratio`` instead of
   ``contact_ratio`` and ``mesh_stiffness``;
+- where the stage gives them (the translational model): ``STAGE.mass.MEMBER``,
+  ``STAGE.bearing_stiffness.MEMBER`` (MEMBER also ``planet``),
+  ``STAGE.base_diameter_mm.GEAR``, ``STAGE.bearing_damping_ratio`` and
+  ``STAGE.planet_position_error_um.tangential.I`` (or ``radial``; ``I`` 1-based);
 - ``STAGE.planet_angles_deg.I`` for the angle of planet ``I``, **1-based** as in
   "planet 2" of the messages and mesh names (``1.sp2``); planet 1 is the reference at
   0 deg and is not a parameter;
@@ -56,6 +60,13 @@ STAGE_TABLES = {
     "inertia": ("sun", "ring", "carrier", "planet"),
 }
 """Stage keys that are tables of numbers, with their sub-keys."""
+
+OPTIONAL_TABLES = {
+    "mass": ("sun", "ring", "carrier"),
+    "bearing_stiffness": ("sun", "ring", "carrier", "planet"),
+    "base_diameter_mm": ("sun", "planet", "ring"),
+}
+"""Stage tables a file may give (the translational model's), with their sub-keys."""
 
 GEOMETRY_SCALARS = {"face_width_mm": "face_width_mm", "addendum_coefficient": "addendum",
                     "dedendum_coefficient": "dedendum",
@@ -157,6 +168,7 @@ def continuous_paths(train: Train, gear: str | None = None, *, linear: bool = Fa
         out += [f"{f}planet_angles_deg.{i}" for i in range(2, s.n_planets + 1)]
         out += [f"{f}inertia.{k}" for k in STAGE_TABLES["inertia"]]
         out.append(f + "planet_mass")
+        out += _optional_paths(s) if train.translational else []
     for k, c in enumerate(train.couplings):
         out += [f"couplings.{c.id if c.id is not None else k}.{key}"
                 for key in COUPLING_KEYS if getattr(c, key) is not None]
@@ -242,6 +254,40 @@ def _getter(steps: tuple) -> Callable[[Train], Array]:
     return where
 
 
+def _optional_paths(s) -> list[str]:
+    """The translational keys that stage ``s`` gives, as paths."""
+    f = f"{s.id}."
+    out = [f"{f}{key}.{sub}" for key, subs in OPTIONAL_TABLES.items()
+           if getattr(s, key) is not None for sub in subs]
+    if s.bearing_damping_ratio is not None:
+        out.append(f + "bearing_damping_ratio")
+    if s.planet_position_error_um is not None:
+        out += [f"{f}planet_position_error_um.{d}.{i}" for d in ("tangential", "radial")
+                for i in range(1, s.n_planets + 1)]
+    return out
+
+
+def _optional_leaf(s, k: int, parts: list[str], bad) -> Leaf:
+    """A path into a translational key of stage ``s`` (``k`` its position)."""
+    key, path = parts[1], ".".join(parts)
+    if getattr(s, key) is None:
+        raise bad(f"stage {s.id!r} does not set {key}; set it in the train file to vary it")
+    if key == "bearing_damping_ratio":
+        if len(parts) != 2:
+            raise bad(f"{s.id}.{key} is one number; write the path as {s.id}.{key}")
+        return Leaf(path, _getter(("stages", k, key)))
+    if key == "planet_position_error_um":
+        valid = (f"{s.id}.{key}.tangential.I or .radial.I with planet I = 1..{s.n_planets}")
+        if (len(parts) != 4 or parts[2] not in ("tangential", "radial")
+                or not parts[3].isdigit() or not 1 <= int(parts[3]) <= s.n_planets):
+            raise bad(f"name one planet's error: {valid}")
+        return Leaf(path, _getter(("stages", k, key, parts[2])), index=int(parts[3]) - 1)
+    subs = OPTIONAL_TABLES[key]
+    if len(parts) != 3 or parts[2] not in subs:
+        raise bad(f"{s.id}.{key} has sub-keys {', '.join(subs)} (e.g. {s.id}.{key}.{subs[0]})")
+    return Leaf(path, _getter(("stages", k, key, parts[2])))
+
+
 def _stage_leaf(train: Train, k: int, parts: list[str], bad) -> Leaf:
     s = train.stages[k]
     path = ".".join(parts)
@@ -251,6 +297,8 @@ def _stage_leaf(train: Train, k: int, parts: list[str], bad) -> Leaf:
     key = parts[1]
     if key in GEOMETRY_SCALARS or key == "profile_shift":
         return _geometry_leaf(s, k, parts, bad)
+    if key in OPTIONAL_TABLES or key in ("bearing_damping_ratio", "planet_position_error_um"):
+        return _optional_leaf(s, k, parts, bad)
     if key in ("contact_ratio", "mesh_stiffness") and s.stiffness_from_geometry:
         raise bad(f"stage {s.id!r} derives {key} from its tooth geometry; vary "
                   f"{s.id}.face_width_mm or {s.id}.profile_shift.sun|planet|ring instead")

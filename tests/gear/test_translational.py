@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import gearjax as gj
 from gearjax import TrainError, assemble, dumps_train, loads_train
 from gearjax._engine.modal import modes
 from train_refusals import mutate, refuse
@@ -159,3 +160,20 @@ def test_an_unknown_model_is_refused():
     text = mutate(LIN_PARKER, lambda raw: raw.update(model="lumped"))
     with pytest.raises(TrainError, match="model = 'lumped': must be one of"):
         _load(text)
+
+
+def test_translational_keys_are_paths():
+    """Masses, bearings, base diameters and pin errors vary like every other value
+    (sensitivities, calibration, studies)."""
+    train = _load(_lin_parker(4, planet_position_error_um={"tangential": [0.0, 5.0, 0.0, 0.0]}))
+    paths = gj.continuous_paths(train)
+    assert {"1.mass.carrier", "1.bearing_stiffness.planet", "1.base_diameter_mm.ring",
+            "1.planet_position_error_um.tangential.2"} <= set(paths)
+    floating = gj.set_path(train, "1.bearing_stiffness.sun", 0.0)
+    assert float(floating.stages[0].bearing_stiffness.sun) == 0.0
+    moved = gj.set_path(train, "1.planet_position_error_um.radial.3", 7.0)
+    assert np.asarray(moved.stages[0].planet_position_error_um.radial).tolist() == [0, 0, 7, 0]
+    with pytest.raises(TrainError, match="planet I = 1..4"):
+        gj.get_path(train, "1.planet_position_error_um.tangential.5")
+    with pytest.raises(TrainError, match="does not set bearing_damping_ratio"):
+        gj.get_path(train, "1.bearing_damping_ratio")
