@@ -232,6 +232,8 @@ from ._plot.figures import (
     separation_figure as separation_figure,
 )
 from ._plot.study_figure import study_figure as study_figure
+from ._plot.bearing_figure import bearing_figure as bearing_figure
+from ._gear.load_sharing import load_sharing as load_sharing
 from ._plot.save import (
     plot_mode_shapes as plot_mode_shapes,
     plot_optimize as plot_optimize,

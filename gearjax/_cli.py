@@ -532,8 +532,10 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--pareto", nargs=2, metavar=("MERIT", "MERIT"),
                    help="a study's Pareto set of these two figures of merit (default: the "
                         "first two it has)")
-    c.add_argument("--what", choices=("rms", "dlf", "separation", "torque"), default="rms",
-                   help="RMS mesh force, dynamic load factor, separation share or mean torque")
+    c.add_argument("--what", choices=("rms", "dlf", "separation", "torque", "bearings"),
+                   default="rms",
+                   help="RMS mesh force, dynamic load factor, separation share, mean torque, "
+                        "or the bearing forces (translational model)")
     c.add_argument("--out", metavar="FIG", help="figure file (default: RESULTS with .png)")
     c.add_argument("--json", action="store_true", help="one JSON object on stdout")
     c.set_defaults(run=_plot_cmd, needs_train=False)

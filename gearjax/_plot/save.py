@@ -16,6 +16,8 @@ from .._errors import TrainError, bad_argument
 from .._io.results import read_netcdf
 from .._io.verify_file import load_verify
 from .._engine.modal import ModalResult
+from .bearing_figure import bearing_figure
+from .units import frequency_unit
 
 WHAT = {"rms": ("rms_force", "RMS mesh force (N)"), "dlf": ("dlf", "dynamic load factor"),
         "separation": ("separation", "share of period in separation"),
@@ -182,14 +184,6 @@ def _not_a_trend(ax) -> None:
         ax.set_ylim(mid - MIN_SPAN * size / 2, mid + MIN_SPAN * size / 2)
 
 
-def frequency_unit(ds) -> tuple[float, str]:
-    """``(scale, unit)`` of a frequency axis that fits the points of ``ds``: kHz from
-    1 kHz up, Hz below (a wind turbine's meshes run at tens of Hz)."""
-    f = np.asarray(ds["mesh_frequency_hz"], dtype=float)
-    top = float(np.nanmax(np.abs(f))) if f.size and np.isfinite(f).any() else 0.0
-    return (1e3, "kHz") if top >= 1e3 else (1.0, "Hz")
-
-
 TITLE_WIDTH = 100
 """Characters of a figure title's line (a longer title is wrapped, not clipped)."""
 
@@ -329,15 +323,16 @@ def plot_results(results, out=None, what: str = "rms") -> tuple[str, pathlib.Pat
     The figure depends on the kind of result, the file's ``kind`` attribute (files
     without one: ``simulate`` when they hold integration statistics, else ``sweep``):
     :data:`RESULT_PLOTS` maps each kind to its drawing function (new kinds register
-    there). ``what``: ``rms``, ``dlf``, ``separation`` or ``torque`` (:func:`plot_sweep`);
+    there). ``what``: ``rms``, ``dlf``, ``separation`` or ``torque`` (:func:`plot_sweep`),
+    or ``bearings`` (:func:`~gearjax._plot.bearing_figure.bearing_figure`, translational);
     ``out``: the figure (default: ``results`` with the suffix ``.png``).
 
     **Returns:** ``(kind, figure path)``. **Raises:** ``TrainError`` (one line naming the
     file) for a missing, unreadable or non-gearjax file, or a kind with no figure.
     """
     path = pathlib.Path(results)
-    if what not in WHAT:
-        raise bad_argument("what", what, f"must be one of {', '.join(WHAT)}")
+    if what not in WHAT and what != "bearings":
+        raise bad_argument("what", what, f"must be one of {', '.join(WHAT)}, bearings")
     ds = _open_results(path)
     kind = result_kind(ds)
     if kind not in RESULT_PLOTS:
@@ -346,7 +341,17 @@ def plot_results(results, out=None, what: str = "rms") -> tuple[str, pathlib.Pat
     fig = pathlib.Path(out) if out else path.with_suffix(".png")
     if fig.resolve() == path.resolve():
         raise bad_argument("out", str(fig), "would overwrite the results file")
-    RESULT_PLOTS[kind](path, ds, fig, what)
+    if what == "bearings":  # any kind with bearing forces (sweep, simulate)
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        figure = bearing_figure(ds, title=f"{path.name}: bearing forces")
+        figure.savefig(fig, dpi=120)
+        plt.close(figure)
+    else:
+        RESULT_PLOTS[kind](path, ds, fig, what)
     return kind, fig
 
 

@@ -132,3 +132,18 @@ def test_harmonic_balance_agrees_with_integration(linear, at_hz, tolerance):
         hb, ni = (r[f"bearing_{field}"].values for r in (result.hb, result.ni))
         pins = slice(3, None)  # the central bearings carry round-off (equal spacing)
         np.testing.assert_allclose(hb[:, pins], ni[:, pins], rtol=tolerance)
+
+
+def test_plot_draws_the_bearing_forces(helicopter, tmp_path, capsys):
+    from gearjax._cli import main
+
+    _, ds = helicopter
+    nc, fig = tmp_path / "sweep.nc", tmp_path / "bearings.png"
+    gj.save_results(ds, nc)
+    assert main(["plot", str(nc), "--what", "bearings", "--out", str(fig)]) == 0
+    assert fig.stat().st_size > 10_000
+    torsional = tmp_path / "torsional.nc"
+    gj.save_results(ds.drop_vars([v for v in ds.variables if str(v).startswith("bearing")]),
+                    torsional)
+    assert main(["plot", str(torsional), "--what", "bearings"]) == 2
+    assert 'model = "translational"' in capsys.readouterr().err
