@@ -67,8 +67,9 @@ class Campbell:
       stiffness harmonics kept);
     - ``excitation_hz`` ``(S, H, R)``: ``h * f_n`` at each speed (Hz);
     - ``mode_hz`` ``(M,)``: distinct elastic natural frequencies (Hz), ascending;
-      ``mode_multiplicity``, ``mode_family`` (``overall`` | ``planet``), ``mode_stage``
-      (stage id of a planet mode, ``""`` otherwise);
+      ``mode_multiplicity``, ``mode_family`` (``overall`` | ``planet``, and in the
+      translational model ``rotational`` | ``translational``), ``mode_stage`` (stage id
+      of a mode that moves one stage only, ``""`` otherwise);
     - ``crossings``: every ray-mode crossing inside the speed range, by speed.
     """
 
@@ -156,7 +157,8 @@ def campbell(
             for m_idx, m in enumerate(distinct):
                 r = m.hz / (h * per_rpm_arr[i])
                 if lo <= r <= hi:
-                    excited, why = _drives(phasing[i][j], loaded[i], sid, m.family, m.stage)
+                    excited, why = _drives(phasing[i][j], loaded[i], sid, m.family, m.stage,
+                                           train.translational)
                     crossings.append(Crossing(rpm=float(r), hz=float(m.hz), stage=sid,
                                               harmonic=int(h), mode=m_idx, excited=excited,
                                               why=why))
@@ -171,20 +173,31 @@ def campbell(
         crossings=tuple(crossings))
 
 
-def _drives(kind: str, loaded: bool, stage: str, family: str, mode_stage: str | None):
-    """``(excited, why)`` of harmonic phasing ``kind`` of ``stage`` against a mode."""
+def _drives(kind: str, loaded: bool, stage: str, family: str, mode_stage: str | None,
+            translational: bool = False):
+    """``(excited, why)`` of harmonic phasing ``kind`` of ``stage`` against a mode of
+    ``family`` (:func:`~gearjax._engine.modal.modes`); ``translational``: the train's
+    model has translations (then a sequential harmonic moves the centres, not the
+    planets: Parker & Lin, J. Mech. Des. 126 (2004))."""
     if kind == "beyond model":
         return False, "no stiffness harmonic this high in the model"
     if not loaded:
         return False, "unloaded stage: parametric only"
     if kind == "unequal spacing":
         return True, "unequal planet spacing: phasing rule does not apply"
+    if family in ("planet", "translational") and mode_stage not in (None, stage):
+        return False, f"{family} mode of stage {mode_stage}: not moved by stage {stage}"
+    if family == "translational":  # Parker & Lin 2004: only k = 1, N - 1 moves the centres
+        if kind == "sequential":
+            return True, "sequential harmonic, translational mode"
+        return False, f"phasing cancels: {kind} harmonic, translational mode"
     if family == "planet":
-        if mode_stage != stage:
-            return False, f"planet mode of stage {mode_stage}: not moved by stage {stage}"
         if kind == "in-phase":
             return False, "phasing cancels: in-phase harmonic, planet mode"
+        if kind == "sequential" and translational:
+            return False, ("phasing cancels: a sequential harmonic drives the translational "
+                           "modes, not the planet modes")
         return True, f"{kind} harmonic, planet mode"
     if kind == "in-phase":
-        return True, "in-phase harmonic, overall mode"
-    return False, f"phasing cancels: {kind} harmonic, overall mode"
+        return True, f"in-phase harmonic, {family} mode"
+    return False, f"phasing cancels: {kind} harmonic, {family} mode"

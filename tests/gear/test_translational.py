@@ -177,3 +177,16 @@ def test_translational_keys_are_paths():
         gj.get_path(train, "1.planet_position_error_um.tangential.5")
     with pytest.raises(TrainError, match="does not set bearing_damping_ratio"):
         gj.get_path(train, "1.bearing_damping_ratio")
+
+
+def test_campbell_applies_the_translational_phasing_rules():
+    """Parker & Lin (2004): with N = 5 and Z_s = 41 the first harmonic is sequential
+    (41 mod 5 = 1) and drives only the translational modes, the second counter-phase
+    (82 mod 5 = 2) only the planet modes, the fifth in-phase only the rotational ones."""
+    text = mutate(_translational(HELICOPTER, 5e8, teeth={"sun": 41, "planet": 30, "ring": 101}),
+                  lambda raw: raw.update(stiffness_harmonics=5))
+    diagram = gj.campbell(_load(text), "flight", rpm_range=(100.0, 20000.0), harmonics=5)
+    families = diagram.mode_family
+    excited = {h: {families[c.mode] for c in diagram.crossings if c.harmonic == h and c.excited}
+               for h in (1, 2, 5)}
+    assert excited == {1: {"translational"}, 2: {"planet"}, 5: {"rotational"}}
