@@ -589,6 +589,7 @@ def _info(args, train, notes) -> int:
         "ratio_exact": str(kin.ratio),
         "mu": list(kin.mu) if kin.mu is not None else None,
         "dof": train.n_dof,
+        "model": train.model,
         "input_rpm": args.input_rpm,
         "stages": [
             {"id": s.id, "loaded": s.loaded, "turning": s.turning, "sigma": s.sigma,
@@ -617,7 +618,8 @@ def _info(args, train, notes) -> int:
     print(f"{train.name}: gear {g.name!r} (input {g.input}, output {g.output}, "
           f"brakes {', '.join(g.brakes) or 'none'})" + (f"  [{g.note}]" if g.note else ""))
     mu = "null (no mesh turns)" if kin.mu is None else str(tuple(kin.mu))
-    print(f"ratio {kin.ratio} = {float(kin.ratio):.6g}   mu = {mu}   {train.n_dof} DOF")
+    print(f"ratio {kin.ratio} = {float(kin.ratio):.6g}   mu = {mu}   {train.n_dof} DOF "
+          f"({train.model} model)")
     print(f"\n{'stage':>6} {'loaded':>7} {'mesh Hz @ %g rpm' % args.input_rpm:>20} {'sigma':>6}"
           f" {'planet/carrier':>15}")
     for s in out["stages"]:

@@ -190,3 +190,19 @@ def test_campbell_applies_the_translational_phasing_rules():
     excited = {h: {families[c.mode] for c in diagram.crossings if c.harmonic == h and c.excited}
                for h in (1, 2, 5)}
     assert excited == {1: {"translational"}, 2: {"planet"}, 5: {"rotational"}}
+
+
+def test_info_and_modes_commands_report_the_model(capsys):
+    import json
+
+    from gearjax._cli import main
+
+    path = str(DATA / "lin_parker_stage.toml")
+    assert main(["info", path, "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert (info["model"], info["dof"]) == ("translational", 21)
+    assert info["load_sharing"]["1"] == pytest.approx(1.0, abs=1e-9)
+    assert main(["modes", path, "--json"]) == 0
+    modes_out = json.loads(capsys.readouterr().out)
+    assert {m["family"] for m in modes_out["modes"]} == {"rotational", "translational", "planet"}
+    assert all(abs(sum(m["kinetic"].values()) - 1.0) < 1e-9 for m in modes_out["modes"])
