@@ -44,12 +44,14 @@ def main() -> None:
             best[name] = min(best[name], time.perf_counter() - t0)
     print(f"complete sweep with backlash, paper train, gear first, {args.lo:g}-{args.hi:g} Hz,"
           f" best of {args.rounds}")
-    print(f"{'model':>14} {'DOF':>4} {'points':>7} {'branches':>9} {'seconds':>8} {'ratio':>6}")
+    print(f"{'model':>14} {'DOF':>4} {'points':>7} {'branches':>9} {'seconds':>8} {'ratio':>6}"
+          "  phases of the last run (s)")
     for name, res in results.items():
         ds = res.dataset
+        phases = ", ".join(f"{k} {v:.1f}" for k, v in res.phase_seconds.items())
         print(f"{name:>14} {trains[name].n_dof:>4} {ds.sizes['point']:>7} "
               f"{len(set(ds['branch'].values.tolist())):>9} {best[name]:>8.1f} "
-              f"{best[name] / best['torsional']:>6.2f}")
+              f"{best[name] / best['torsional']:>6.2f}  {phases}")
 
 
 if __name__ == "__main__":
