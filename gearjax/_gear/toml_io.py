@@ -26,11 +26,11 @@ from .train import (
     BearingStiffness,
     CentralMass,
     Coupling,
-    PlanetErrors,
     Gear,
     Housing,
     Inertia,
     PerGear,
+    PlanetErrors,
     Stage,
     SunRing,
     Teeth,
@@ -250,8 +250,8 @@ def _stage(r: TomlReader, raw, i: int, model: str) -> Stage:
 
 def _translational_keys(r: TomlReader, raw, f: str, model: str) -> dict:
     """``mass``, ``bearing_stiffness`` (required by the translational model; kept and
-    written back, but unused, by the torsional one), ``bearing_damping_ratio`` and
-    ``base_diameter_mm``."""
+    written back, but unused, by the torsional one), ``bearing_damping_ratio``,
+    ``base_diameter_mm`` and ``planet_position_error_um``, as ``Stage`` keywords."""
     out = {}
     for key, cls, names, low, strict in (
             ("mass", CentralMass, MEMBERS, 0.0, True),

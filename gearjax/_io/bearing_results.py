@@ -36,8 +36,9 @@ def add_bearing_forces(ds: xr.Dataset, names: Sequence[str], stages: Sequence[st
 
     **Arguments:** ``rows`` ``(b, 2, n)``: each bearing's two deflection rows over the
     ``n`` coordinates of ``ds``'s ``dof``, ``offsets`` ``(b, 2)`` their rest offsets (m:
-    the deflection is ``r x + e``); ``stiffness``, ``damping`` ``(b,)`` (N/m, N s/m). ``ds`` needs ``omega`` and the displacement coefficients (``harmonic`` with
-    ``eta``, or ``wave`` with ``wave_vector`` and ``wave_frequency``).
+    the deflection is ``r x + e``); ``stiffness``, ``damping`` ``(b,)`` (N/m, N s/m).
+    ``ds`` needs ``omega`` and the displacement coefficients (``harmonic`` with ``eta``,
+    or ``wave`` with ``wave_vector`` and ``wave_frequency``).
     """
     rows = np.asarray(rows, dtype=float)
     e = np.asarray(offsets, dtype=float)

@@ -126,9 +126,9 @@ def test_points_json_carries_the_bearings(helicopter):
                                                      (False, 1400.0, 0.02)])
 def test_harmonic_balance_agrees_with_integration(linear, at_hz, tolerance):
     """model.md: within 1% (linear) and 2% (backlash) of the time integration, mesh and
-    pin forces, on the translational helicopter stage; at 1400 Hz the backlash run loses contact for about
-    a tenth of the period. Slow (about 10 s on 2 cores with compilation): two harmonic
-    balances and integrations of a 24-coordinate system."""
+    pin forces, on the translational helicopter stage; at 1400 Hz the backlash run loses
+    contact for about a tenth of the period. Slow (about 10 s on 2 cores with
+    compilation): two harmonic balances and integrations of a 24-coordinate system."""
     train = _translational("helicopter_five_planets.toml")
     result = gj.verify_gear(train, "flight", [at_hz], linear=linear, harmonics=16)
     assert result.all_ok and float(np.max(result.rel_diff)) < tolerance
