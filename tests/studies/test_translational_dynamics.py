@@ -153,3 +153,29 @@ def test_plot_draws_the_bearing_forces(helicopter, tmp_path, capsys):
                     torsional)
     assert main(["plot", str(torsional), "--what", "bearings"]) == 2
     assert 'model = "translational"' in capsys.readouterr().err
+
+
+@pytest.mark.long
+def test_bearing_forces_on_a_torus_balance_the_meshes():
+    """The 43 : 19 : 81 train (mesh frequencies on a 2-torus) in the translational model:
+    the bearing forces come from the torus' wave coefficients, and pin 1 of stage 1
+    still balances its planet's mean mesh forces. In the `long` step of CI (about 40-70 s
+    on 2 cores): a torus sweep compiles its own programs, which no other test of the
+    translational model shares."""
+    def change(raw):
+        raw["model"] = "translational"
+        for s in raw["stages"]:
+            s["mass"] = {"sun": 0.5, "ring": 1.0, "carrier": 0.7}
+            s["bearing_stiffness"] = {"sun": 1e8, "ring": 1e9, "carrier": 1e8, "planet": 1e8}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        train = loads_train(mutate((DATA / "two_stage_43_19_81.toml").read_text(), change))
+        ds = gj.sweep(train, "first", 5000.0, 5050.0, linear=True, points=3).dataset
+    assert ds.sizes["angle"] == 2
+    a = np.deg2rad(float(train.stages[0].pressure_angle_deg))
+    F = ds["mean_force"].to_pandas()
+    resultant = (np.outer(F["1.sp1"], [-np.sin(a), -np.cos(a)])
+                 + np.outer(F["1.rp1"], [np.sin(a), -np.cos(a)]))
+    np.testing.assert_allclose(ds["bearing_mean_force"].sel(bearing="1.pin1").values,
+                               np.linalg.norm(resultant, axis=1), rtol=1e-7)
+    assert float(ds["bearing_rms_force"].sel(bearing="2.sun").min()) > 0.0
