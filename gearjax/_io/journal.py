@@ -330,9 +330,11 @@ def read(path, warn: Callable[[str], None] = _stderr) -> tuple[dict | None, list
 def check(path, found: Mapping, expected: Mapping) -> None:
     """Refuse a journal whose header ``found`` is not that of the run ``expected`` (both
     from :func:`header`): ``TrainError`` naming the file and the first field that
-    differs (``kind``, ``gearjax_version``, then the run fields in order)."""
+    differs (``kind``, ``gearjax_version``, then the run fields in order, each written
+    `` `name` `` as the library's argument names are, which the command line shows as
+    its flags)."""
     rule = ("the journal was written by a different run; rerun with the same train, gear "
-            "and flags, or delete the journal to start afresh")
+            "and settings, or delete the journal to start afresh")
     for key in ("kind", "gearjax_version"):
         if found.get(key) != expected.get(key):
             raise fail(str(path), key, found.get(key), f"differs from this run's "
@@ -341,7 +343,7 @@ def check(path, found: Mapping, expected: Mapping) -> None:
     for key in list(want) + [k for k in have if k not in want]:
         if key not in have or key not in want or have[key] != want[key]:
             value, mine = _brief(have.get(key)), _brief(want.get(key))
-            raise fail(str(path), key, value, f"differs from this run's {mine!r}: {rule}")
+            raise fail(str(path), f"`{key}`", value, f"differs from this run's {mine!r}: {rule}")
 
 
 def _brief(value):

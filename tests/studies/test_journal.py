@@ -125,12 +125,12 @@ def test_not_a_journal_is_refused(tmp_path):
 
 def test_a_different_run_is_refused_naming_the_field(tmp_path):
     path = tmp_path / "r.nc.journal"
-    mine = _journal.header("sweep", {"train": "a" * 100, "--gear": "first", "--to": 2450.0})
+    mine = _journal.header("sweep", {"train": "a" * 100, "gear": "first", "to_hz": 2450.0})
     _journal.check(path, json.loads(json.dumps(mine)), mine)  # equal after a JSON trip
     for key, value, words in (
-            ("--to", 2460.0, ["--to = 2460.0", "this run's 2450.0"]),
-            ("--gear", "second", ["--gear = 'second'", "'first'"]),
-            ("train", "b" * 100, ["train = '<text of 100 characters, crc32 "])):
+            ("to_hz", 2460.0, ["`to_hz` = 2460.0", "this run's 2450.0"]),
+            ("gear", "second", ["`gear` = 'second'", "'first'"]),
+            ("train", "b" * 100, ["`train` = '<text of 100 characters, crc32 "])):
         other = json.loads(json.dumps(mine))
         other["run"][key] = value
         with pytest.raises(gj.TrainError) as e:
@@ -151,8 +151,8 @@ def test_the_journal_holds_every_point_with_its_continuation_state(full):
     result, data = full
     lines = records(data)
     head = _journal.decode(lines[0].rstrip(b"\n"))
-    assert head["kind"] == "sweep" and head["run"]["--from"] == 2400.0
-    assert head["run"]["--harmonics"] == 8 and "[[stages]]" in head["run"]["train"]
+    assert head["kind"] == "sweep" and head["run"]["from_hz"] == 2400.0
+    assert head["run"]["harmonics"] == 8 and "[[stages]]" in head["run"]["train"]
     recs = [_journal.decode(line.rstrip(b"\n")) for line in lines[1:]]
     points = [r for r in recs if r["type"] == "point"]
     assert recs[-1] == {"type": "end", "segment": 0, "stop": "reached_end"}
@@ -269,7 +269,7 @@ def test_another_train_is_refused(train, full, tmp_path):
         warnings.simplefilter("ignore", gj.GeometryWarning)
         other = gj.loads_train(gj.dumps_train(train).replace("mesh_damping_ratio = 0.04",
                                                              "mesh_damping_ratio = 0.05", 1))
-    with pytest.raises(gj.TrainError, match=r"sweep\.nc\.journal: train = '<text of"):
+    with pytest.raises(gj.TrainError, match=r"sweep\.nc\.journal: `train` = '<text of"):
         _sweep.sweep(other, "first", journal=path, resume=True, **BAND)
 
 

@@ -25,26 +25,23 @@ def run_fields(train_toml: str, *, gear: str, stage: str, from_hz, to_hz, linear
                harmonics, eta: int, max_step_hz, smoothing, points: int,
                max_points: int, complete: bool = True, seeds: int = 0) -> dict:
     """The fields of a sweep's journal header: everything its results depend on, under
-    the command line's words for the arguments; a refusal names the key that differs
-    (``--max-points`` bounds a linear sweep's refinement too, so a linear journal
-    without it is refused, naming it). The
-    completion's fields (:mod:`~gearjax._studies.sweep.completion`) are there only where
-    they differ from the default: ``--no-complete`` where a non-linear sweep is not
-    completed, ``--seeds`` where it has integration seeds (a journal written before the
-    completion existed holds the walk, which a completed run begins with)."""
-    run = {"train": train_toml, "--gear": gear, "--stage": stage,
-           "--from": float(from_hz), "--to": float(to_hz), "--linear": bool(linear),
-           "--harmonics": None if harmonics is None else int(harmonics), "--eta": int(eta),
-           "--max-step": None if max_step_hz is None else float(max_step_hz),
-           "--smoothing": float(smoothing)}
-    run["--max-points"] = int(max_points)
+    :func:`~gearjax.sweep`'s argument names (``train`` the train file's text); a refusal
+    names the key that differs (``max_points`` bounds a linear sweep's refinement too).
+    The completion's fields (:mod:`~gearjax._studies.sweep.completion`) are there only
+    where they differ from the default: ``complete`` (False) where a non-linear sweep is
+    not completed, ``seeds`` where it has integration seeds."""
+    run = {"train": train_toml, "gear": gear, "stage": stage,
+           "from_hz": float(from_hz), "to_hz": float(to_hz), "linear": bool(linear),
+           "harmonics": None if harmonics is None else int(harmonics), "eta": int(eta),
+           "max_step_hz": None if max_step_hz is None else float(max_step_hz),
+           "smoothing": float(smoothing), "max_points": int(max_points)}
     if linear:
-        run["--points"] = int(points)
+        run["points"] = int(points)
     else:
         if not complete:
-            run["--no-complete"] = True
+            run["complete"] = False
         if complete and seeds:
-            run["--seeds"] = int(seeds)
+            run["seeds"] = int(seeds)
     return run
 
 
