@@ -27,6 +27,7 @@ backticked names in any other refusal or warning of gearjax's.
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import math
 import os
@@ -800,6 +801,15 @@ def _modes(args, train, notes) -> int:
         top = sorted(m.kinetic.items(), key=lambda kv: -abs(kv[1]))[:3]
         print(f"{m.hz / 1e3:>10.4f} {m.multiplicity:>4} {m.cls:>8} {fam:>14}  "
               + ", ".join(f"{k} {v:.0%}" for k, v in top))
+    if train.translational:
+        counts = collections.Counter(m.family for m in result.modes)
+        print("mode families: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+        for s in train.stages:
+            gaps = np.diff(np.r_[np.asarray(s.planet_angles_deg, float), 360.0])
+            if not np.allclose(gaps, gaps[0]):
+                print(f"stage {s.id}: planets unequally spaced: Lin & Parker's rotational, "
+                      "translational and planet types need equal spacing; modes that keep "
+                      "one of them are named so, the rest overall")
     if args.plot:
         print(f"mode shapes written to {args.plot}")
     return EXIT_OK
