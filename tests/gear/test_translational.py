@@ -206,3 +206,15 @@ def test_info_and_modes_commands_report_the_model(capsys):
     modes_out = json.loads(capsys.readouterr().out)
     assert {m["family"] for m in modes_out["modes"]} == {"rotational", "translational", "planet"}
     assert all(abs(sum(m["kinetic"].values()) - 1.0) < 1e-9 for m in modes_out["modes"])
+
+
+def test_modes_says_where_unequal_spacing_breaks_the_mode_types(tmp_path, capsys):
+    """Planets at 0, 90 and 180 degrees: no mode keeps Lin & Parker's types, and the
+    text says why."""
+    from gearjax._cli import main
+
+    path = tmp_path / "unequal.toml"
+    path.write_text(_translational((DATA / "three_planets.toml").read_text(), 5e8))
+    assert main(["modes", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "mode families: overall 18" in out and "planets unequally spaced" in out
