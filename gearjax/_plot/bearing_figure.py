@@ -13,7 +13,7 @@ MEMBER_COLORS = {"sun": "tab:blue", "ring": "tab:orange", "carrier": "tab:green"
 def bearing_figure(ds, title: str = ""):
     """One panel per stage: the peak magnitude (solid) and the mean magnitude (dotted)
     of each bearing's force (N) against reference-stage mesh frequency; sun, ring and
-    carrier in colour, planet pins grey. Unstable points are dropped from the lines.
+    carrier in colour, planet pins grey; the peak of unstable states thin and dashed.
 
     **Raises:** ``TrainError`` (a ``bad_argument`` naming ``what``) where ``ds`` has no
     bearing forces (a torsional train). **Returns:** the Figure.
@@ -25,7 +25,8 @@ def bearing_figure(ds, title: str = ""):
                                                'train file needs model = "translational"')
     scale, unit = frequency_unit(ds)
     f = np.asarray(ds["mesh_frequency_hz"], float) / scale
-    keep = np.asarray(ds["stable"]) != 0 if "stable" in ds else np.ones(f.shape, bool)
+    stable = np.asarray(ds["stable"]) if "stable" in ds else np.full(f.shape, -1)
+    keep = stable != 0
     order = np.argsort(f)
     stages = list(dict.fromkeys(ds["bearing_stage"].values.tolist()))
     fig, axes = plt.subplots(len(stages), 1, figsize=(10.0, 3.0 * len(stages)), sharex=True,
@@ -38,12 +39,14 @@ def bearing_figure(ds, title: str = ""):
             pin = member.startswith("pin")
             color = "0.55" if pin else MEMBER_COLORS[member]
             label = "planet pins" if member == "pin1" else (None if pin else member)
-            for var, style, lw in (("bearing_max_force", "-", 1.2),
-                                   ("bearing_mean_force", ":", 0.9)):
-                y = np.where(keep, np.asarray(ds[var].values[:, j], float), np.nan)
-                ax.plot(f[order], y[order], style, color=color, lw=lw,
-                        label=label if var == "bearing_max_force" else None)
-        ax.set_title(f"stage {stage} bearings: peak (solid) and mean (dotted) force", fontsize=9)
+            peak = np.asarray(ds["bearing_max_force"].values[:, j], float)
+            mean = np.asarray(ds["bearing_mean_force"].values[:, j], float)
+            for y, style, lw, tag in ((np.where(keep, peak, np.nan), "-", 1.2, label),
+                                      (np.where(keep, np.nan, peak), "--", 0.7, None),
+                                      (np.where(keep, mean, np.nan), ":", 0.9, None)):
+                ax.plot(f[order], y[order], style, color=color, lw=lw, label=tag)
+        ax.set_title(f"stage {stage} bearings: peak (solid; unstable states dashed) and mean "
+                     "(dotted) force", fontsize=9)
         ax.set_ylabel("bearing force (N)", fontsize=8)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, ncol=4)
