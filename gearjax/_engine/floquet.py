@@ -208,7 +208,7 @@ class _Orbit(eqx.Module):
         rates = jnp.asarray(s.mesh_rates(), dtype=float)
         p, dp = _line_series(self.P, self.problem.basis, self.w0, t)
         e, de = _mesh_series(s.te_cos, s.te_sin, rates, self.omega, t)
-        return p - e, dp - de
+        return p - s.te_mean - e, dp - de
 
     def on_grid(self, n: int):
         """Deflection and rate ``(n, m)`` at the ``n`` equally spaced instants ``t_j = j S /
@@ -230,7 +230,7 @@ class _Orbit(eqx.Module):
         rates = jnp.asarray(s.mesh_rates(), dtype=float) * eta
         tau = jnp.asarray(2 * np.pi * self.turns * np.arange(n) / n)
         e, de = _mesh_series(s.te_cos, s.te_sin, rates, 1.0, tau[:, None])
-        return p - e, dp - self.w0 * de
+        return p - s.te_mean - e, dp - self.w0 * de
 
 
 def _line_series(C: Array, basis, w0, t: Array):

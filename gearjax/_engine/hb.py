@@ -225,7 +225,7 @@ def excitation_on_grid(system: System, basis: _aft.Basis, eta: int = 1):
     if basis.G == 1:
         tau = _aft.phases(basis.n_samples)
         kappa = stiffness_at_phases(system, eta, tau)
-        te, te_rate = transmission_error(system.te_cos, system.te_sin, mu, tau)
+        te, te_rate = transmission_error(system.te_mean, system.te_cos, system.te_sin, mu, tau)
         return kappa, te, te_rate * basis.rates[0]
     # a mesh varies with its own angle only: its series along that angle's T_g samples,
     # spread over the grid by each sample's index along the angle
@@ -235,7 +235,7 @@ def excitation_on_grid(system: System, basis: _aft.Basis, eta: int = 1):
     for T in basis.grid:
         tau = 2 * np.pi * np.arange(T) / T
         series = (stiffness_series(system.k_cos, system.k_sin, mu, tau),
-                  *transmission_error(system.te_cos, system.te_sin, mu, tau))
+                  *transmission_error(system.te_mean, system.te_cos, system.te_sin, mu, tau))
         per_angle.append(jnp.stack([jnp.pad(a, ((0, 0), (0, T_max - T))) for a in series]))
     own = jnp.stack(per_angle)[rows, :, np.arange(len(rows))]  # (m, 3, T_max)
     where = jnp.asarray(_aft.angle_index(basis)[rows])  # (m, T)
@@ -433,7 +433,8 @@ def linear_guess(problem: HBProblem, omega) -> Array:
     """Scaled solution of the linear, mean-stiffness equations at ``omega``, in contact.
 
     Every mesh is taken in contact on its loaded flank (the sign of its static force),
-    so ``g(p) = p - b sign(F_static)``: the backlash shifts the mean deflection by ``b``
+    so ``g(p) = p - b sign(F_static)`` (``p`` includes the mean transmission error
+    ``te_mean``): the backlash shifts the mean deflection by ``b``
     without changing the dynamics. The stiffness variation is dropped (its parametric
     terms need the Newton solve). This is the usual starting point: never start from
     zero inside the backlash gap. Time-invariant equations decouple by cosine-sine pair:
@@ -441,7 +442,7 @@ def linear_guess(problem: HBProblem, omega) -> Array:
     """
     s = problem.system
     _, F_static = static_deflection(s)
-    preload = s.W.T @ (s.kbar * s.backlash * jnp.sign(F_static))
+    preload = s.W.T @ (s.kbar * (s.backlash * jnp.sign(F_static) + s.te_mean))
     n = problem.shape[1]
     K = problem.basis.n_pairs
     w0 = omega / problem.settings.eta

@@ -93,17 +93,19 @@ def stiffness_series(k_cos: Float[Array, "m H"], k_sin: Float[Array, "m H"], mu:
     return 1.0 + fourier_series(k_cos, k_sin, mu, 1.0, tau)
 
 
-def transmission_error(te_cos: Float[Array, "m H"], te_sin: Float[Array, "m H"], mu: Array,
-                       tau) -> tuple[Array, Array]:
+def transmission_error(te_mean: Float[Array, " m"], te_cos: Float[Array, "m H"],
+                       te_sin: Float[Array, "m H"], mu: Array, tau) -> tuple[Array, Array]:
     """Transmission error ``e`` (m) and its phase rate ``de/dtau`` (m/rad) at base phases
     ``tau`` (rad, ``(T,)`` or scalar) of meshes turning ``mu`` ``(m,)`` times per base
-    period. **Returns:** two ``(m, T)`` (or ``(m,)``) arrays; zeros where ``H = 0``."""
+    period: the constant ``te_mean`` plus the harmonics. **Returns:** two ``(m, T)`` (or
+    ``(m,)``) arrays; the rate zero where ``H = 0``."""
     H = te_cos.shape[-1]
+    mean = jnp.broadcast_to(jnp.reshape(te_mean, te_mean.shape + (1,) * jnp.ndim(tau)),
+                            te_cos.shape[:1] + jnp.shape(tau))
     if H == 0:
-        zeros = jnp.zeros(te_cos.shape[:1] + jnp.shape(tau))
-        return zeros, zeros
+        return mean, jnp.zeros_like(mean)
     order = jnp.arange(1, H + 1)[None, :] * mu[:, None]
-    return (fourier_series(te_cos, te_sin, mu, 1.0, tau),
+    return (mean + fourier_series(te_cos, te_sin, mu, 1.0, tau),
             fourier_series(order * te_sin, -order * te_cos, mu, 1.0, tau))
 
 

@@ -1,6 +1,7 @@
 """Static solution: mean stiffness, no backlash, mean torques only.
 
-``(K + W^T diag(kbar) W) x = f_mean`` and ``F_m = kbar_m w_m . x``.
+``(K + W^T diag(kbar) W) x = f_mean + W^T diag(kbar) e_mean`` and
+``F_m = kbar_m (w_m . x - e_mean_m)``.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ def static_deflection(system: System):
     lam, V = jnp.linalg.eigh(0.5 * (Kt + Kt.T))
     tol = lam.shape[0] * jnp.finfo(lam.dtype).eps * jnp.max(jnp.abs(lam))
     inv = jnp.where(jnp.abs(lam) > tol, 1.0 / jnp.where(jnp.abs(lam) > tol, lam, 1.0), 0.0)
-    x = V @ (inv * (V.T @ system.f_mean))
-    return x, system.kbar * (system.W @ x)
+    f = system.f_mean + system.W.T @ (system.kbar * system.te_mean)
+    x = V @ (inv * (V.T @ f))
+    return x, system.kbar * (system.W @ x - system.te_mean)
 
 

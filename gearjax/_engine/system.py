@@ -38,7 +38,9 @@ class System(eqx.Module):
     - ``kbar`` ``(m,)`` mean mesh stiffness (N/m); ``k_cos``, ``k_sin`` ``(m, H)``
       dimensionless stiffness Fourier coefficients of harmonics ``h mu_m Omega``;
     - ``backlash`` ``(m,)`` half clearance (m); ``damping`` ``(m,)`` mesh damping (N s/m);
-    - ``te_cos``, ``te_sin`` ``(m, H_e)``: transmission error (m), same harmonics;
+    - ``te_mean`` ``(m,)``: constant part of the transmission error (m; a planet pin
+      out of place in the torsional model); ``te_cos``, ``te_sin`` ``(m, H_e)``: its
+      harmonics, as the stiffness's;
     - ``mesh_radius`` ``(m,)``: lever arm (m) turning a mesh force into a torque;
     - ``f_mean`` ``(n,)``, ``f_cos``, ``f_sin`` ``(n, L)``: forcing (N m), column ``l``
       at ``forcing_mu[l] Omega``;
@@ -59,6 +61,7 @@ class System(eqx.Module):
     k_sin: Float[Array, "m H"]
     backlash: Float[Array, " m"]
     damping: Float[Array, " m"]
+    te_mean: Float[Array, " m"]
     te_cos: Float[Array, "m He"]
     te_sin: Float[Array, "m He"]
     mesh_radius: Float[Array, " m"]
@@ -141,6 +144,7 @@ def system_from_matrices(
     k_cos=None,
     k_sin=None,
     mesh_mu: Sequence[int] | None = None,
+    te_mean=None,
     te_cos=None,
     te_sin=None,
     f_mean=None,
@@ -192,6 +196,7 @@ def system_from_matrices(
         k_sin=mesh_array(k_sin) if k_sin is not None else jnp.zeros_like(mesh_array(k_cos)),
         backlash=zeros_m if backlash is None else jnp.asarray(backlash, dtype=float).reshape(m),
         damping=zeros_m if damping is None else jnp.asarray(damping, dtype=float).reshape(m),
+        te_mean=zeros_m if te_mean is None else jnp.asarray(te_mean, dtype=float).reshape(m),
         te_cos=mesh_array(te_cos),
         te_sin=mesh_array(te_sin) if te_sin is not None else jnp.zeros_like(mesh_array(te_cos)),
         mesh_radius=jnp.ones(m),

@@ -203,7 +203,7 @@ def excitation(system: System, tau):
     ``f`` (N m or N), ``(n,)`` or ``(n, T)``."""
     rate = jnp.asarray(system.mesh_rates(), dtype=float)
     kappa = stiffness_series(system.k_cos, system.k_sin, rate, tau)
-    te, te_rate = transmission_error(system.te_cos, system.te_sin, rate, tau)
+    te, te_rate = transmission_error(system.te_mean, system.te_cos, system.te_sin, rate, tau)
     f = system.f_mean if jnp.ndim(tau) == 0 else system.f_mean[:, None] * jnp.ones(jnp.shape(tau))
     if system.forcing_mu:
         arg = jnp.asarray(system.forcing_rates(), dtype=float)[:, None] * jnp.atleast_1d(tau)

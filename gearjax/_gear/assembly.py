@@ -7,6 +7,11 @@ planet (rad). Meshes per stage, in order: ``sp1..spN`` then ``rp1..rpN`` with
     p_si = r_s (theta_s - theta_c) + r_p phi_i - e_si(t)
     p_ri = r_r (theta_r - theta_c) - r_p phi_i - e_ri(t)
 
+A pin out of place by ``e_i`` (m) along the carrier's positive rotation moves planet
+``i`` as a carrier rotation ``e_i / r_c`` of its own would: the constant transmission
+errors ``(r_s + r_p) e_i / r_c`` and ``(r_r - r_p) e_i / r_c`` (base radii over the
+centre distance: the cosine of each mesh's operating pressure angle), :func:`pin_te`.
+
 Translational model: the coordinates, mesh deflections and bearings of
 :mod:`.translational` (Lin & Parker 1999), the same meshes in the same order.
 
@@ -58,6 +63,7 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
               + [H for s in train.stages if s.stiffness_from_geometry and s.geometry.relieved])
     M = jnp.zeros((n, n))
     W_rows, kbar, k_cos, k_sin, back, damp, te_cos, te_sin, radius = ([] for _ in range(9))
+    te_mean = []
     mesh_mu, mesh_angle, labels, groups, sides, planets = [], [], [], [], [], []
     dof_labels, dof_group, dof_kind = [], [], []
     offset = 0
@@ -110,8 +116,10 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
             m_eq = I_j * I.planet / (I_j * r_p**2 + I.planet * r_j**2)
             c = 2 * s.mesh_damping_ratio * jnp.sqrt(k_mean * m_eq)
             on = 1.0 if turning else 0.0
+            pins = jnp.zeros(N) if train.translational else pin_te(s, side)
             for i in range(N):
                 W_rows.append(rows[side][i])
+                te_mean.append(pins[i])
                 kbar.append(k_mean)
                 ph = phases[i, :H]
                 k_cos.append(on * (k_a * jnp.cos(ph) + k_b * jnp.sin(ph)))
@@ -149,6 +157,7 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
         k_sin=stack(k_sin, H).reshape(len(labels), H),
         backlash=jnp.stack(back),
         damping=jnp.stack(damp),
+        te_mean=jnp.stack(te_mean),
         te_cos=stack(te_cos, H_e).reshape(len(labels), H_e),
         te_sin=stack(te_sin, H_e).reshape(len(labels), H_e),
         mesh_radius=jnp.stack(radius),
@@ -170,6 +179,20 @@ def assemble(train: Train, gear: str | None = None, kin: Kinematics | None = Non
         mesh_side=tuple(sides),
         mesh_planet=tuple(planets),
     )
+
+
+def pin_te(stage, side: str):
+    """Constant transmission error (m) of each planet's ``side`` mesh (``"sun"`` or
+    ``"ring"``) in the torsional model from its pin's tangential position error,
+    ``(N,)``: ``(r_s + r_p) e / r_c`` or ``(r_r - r_p) e / r_c`` (``r_c`` of
+    :func:`.translational.line_geometry`: the operating centre distance of a stage with
+    a tooth geometry); zeros without errors."""
+    errors = stage.planet_position_error_um
+    if errors is None:
+        return jnp.zeros(stage.n_planets)
+    r_s, r_p, r_r = stage.base_radii()
+    arm = r_s + r_p if side == "sun" else r_r - r_p
+    return arm / translational.line_geometry(stage)[2] * errors.tangential * 1e-6
 
 
 def _springs(train: Train, g, n: int):

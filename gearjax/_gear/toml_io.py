@@ -275,7 +275,9 @@ def _translational_keys(r: TomlReader, raw, f: str, model: str) -> dict:
 
 def _planet_errors(r: TomlReader, raw, f: str, model: str) -> PlanetErrors:
     """``planet_position_error_um = { tangential = [...], radial = [...] }``: one number
-    per planet each (um), a missing list all zeros; the translational model only."""
+    per planet each (um), a missing list all zeros; radial errors in the translational
+    model only (the torsional one takes the tangential errors as mean transmission
+    errors and has no radial freedom for the others)."""
     key = f + "planet_position_error_um"
     table = r.sub(raw, "planet_position_error_um", key, {"tangential", "radial"})
     n = len(raw.get("planet_angles_deg", []))
@@ -286,10 +288,10 @@ def _planet_errors(r: TomlReader, raw, f: str, model: str) -> PlanetErrors:
             raise r.fail(f"{key}.{d}", v.tolist(),
                          f"needs one error per planet ({n}, as planet_angles_deg)")
         lists[d] = jnp.asarray(v)
-    if model != "translational" and any(np.any(np.asarray(v) != 0) for v in lists.values()):
-        raise r.fail(key, {d: np.asarray(v).tolist() for d, v in lists.items()},
-                     'pin position errors need model = "translational" (its pins carry '
-                     "them); the torsional model does not take them")
+    if model != "translational" and np.any(np.asarray(lists["radial"]) != 0):
+        raise r.fail(f"{key}.radial", np.asarray(lists["radial"]).tolist(),
+                     'radial pin errors need model = "translational" (its planets move '
+                     "radially); the torsional model takes tangential errors only")
     return PlanetErrors(**lists)
 
 

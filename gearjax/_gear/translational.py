@@ -21,7 +21,23 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import fail
+from .mesh_stiffness import stage_contacts
 from .train import MEMBERS, Stage
+
+
+def line_geometry(stage: Stage):
+    """Pressure angles (rad) of the sun-planet and ring-planet lines of action and the
+    planet-centre radius ``r_c`` (m), ``(alpha_s, alpha_r, r_c)``: the stage's
+    ``pressure_angle_deg`` (both) and carrier radius; for a stage with a tooth geometry
+    each mesh's operating pressure angle at the operating centre distance
+    (:func:`.mesh_stiffness.stage_contacts`), so that ``r_c cos(alpha_s) = r_s + r_p``
+    and ``r_c cos(alpha_r) = r_r - r_p`` hold with profile shifts too."""
+    if stage.geometry is not None:
+        sun, ring = stage_contacts(stage)
+        return (sun.operating_pressure_angle, ring.operating_pressure_angle,
+                sun.centre_distance)
+    a = jnp.deg2rad(stage.pressure_angle_deg)
+    return a, a, stage.carrier_radius()
 
 
 def translation_offset(stage: Stage, offset: int) -> int:
@@ -48,19 +64,22 @@ def mesh_rows(stage: Stage, offset: int, n: int) -> dict[str, list]:
     """Projection rows ``(n,)`` (m per coordinate unit) of the deflections along the
     lines of action, ``{"sun": [d_s1..d_sN], "ring": [d_r1..d_rN]}``:
 
-        d_sn = -x_s sin(psi_n - a) + y_s cos(psi_n - a) + r_s th_s - zeta_n sin a
-               - eta_n cos a + r_p th_n
-        d_rn = -x_r sin(psi_n + a) + y_r cos(psi_n + a) + r_r th_r + zeta_n sin a
-               - eta_n cos a - r_p th_n
+        d_sn = -x_s sin(psi_n - a_s) + y_s cos(psi_n - a_s) + r_s th_s - zeta_n sin a_s
+               - eta_n cos a_s + r_p th_n
+        d_rn = -x_r sin(psi_n + a_r) + y_r cos(psi_n + a_r) + r_r th_r + zeta_n sin a_r
+               - eta_n cos a_r - r_p th_n
+
+    with ``a_s``, ``a_r`` of :func:`line_geometry` (model.md's one ``alpha`` for a stage
+    without tooth geometry).
     """
     r_s, r_p, r_r = stage.base_radii()
-    a = jnp.deg2rad(stage.pressure_angle_deg)
+    a_s, a_r, _ = line_geometry(stage)
     t = translation_offset(stage, offset)
     rows: dict[str, list] = {"sun": [], "ring": []}
     for i, psi in enumerate(jnp.deg2rad(stage.planet_angles_deg)):
         zeta, eta, theta = t + 6 + 2 * i, t + 7 + 2 * i, offset + 3 + i
-        for side, j, r_j, xy, psi_j, sign in (("sun", 0, r_s, t, psi - a, 1.0),
-                                              ("ring", 1, r_r, t + 2, psi + a, -1.0)):
+        for side, j, r_j, xy, a, psi_j, sign in (("sun", 0, r_s, t, a_s, psi - a_s, 1.0),
+                                                 ("ring", 1, r_r, t + 2, a_r, psi + a_r, -1.0)):
             rows[side].append(
                 jnp.zeros(n).at[xy].set(-jnp.sin(psi_j)).at[xy + 1].set(jnp.cos(psi_j))
                 .at[offset + j].set(r_j).at[zeta].set(-sign * jnp.sin(a))
@@ -74,7 +93,8 @@ def bearing_springs(stage: Stage, offset: int, n: int) -> tuple[list, list, list
     Sun, ring and carrier: ``k_j`` on ``x_j`` and on ``y_j`` (names ``"ID.sun.x"``...).
     Planet pin ``n``: ``k_p`` on its radial deflection ``x_c cos psi + y_c sin psi -
     zeta_n`` and its tangential deflection ``-x_c sin psi + y_c cos psi + r_c th_c -
-    eta_n`` (names ``"ID.pinN.radial"``, ``"ID.pinN.tangential"``).
+    eta_n`` (names ``"ID.pinN.radial"``, ``"ID.pinN.tangential"``), ``r_c`` of
+    :func:`line_geometry`.
     """
     k = stage.bearing_stiffness
     t = translation_offset(stage, offset)
@@ -84,7 +104,7 @@ def bearing_springs(stage: Stage, offset: int, n: int) -> tuple[list, list, list
             rows.append(jnp.zeros(n).at[t + 2 * j + d].set(1.0))
             ks.append(getattr(k, member))
             names.append(f"{stage.id}.{member}.{axis}")
-    r_c = stage.carrier_radius()
+    r_c = line_geometry(stage)[2]
     x_c, y_c = t + 4, t + 5
     for i, psi in enumerate(jnp.deg2rad(stage.planet_angles_deg)):
         c, s = jnp.cos(psi), jnp.sin(psi)
@@ -219,17 +239,18 @@ def check_support(train) -> None:
 
 def rigid_rotation_messages(train) -> list[str]:
     """Stages whose radii let a rigid rotation strain their meshes in this model:
-    ``r_c cos(alpha)`` must equal ``r_s + r_p`` and ``r_r - r_p`` (model.md). Where one
+    ``r_c cos(alpha)`` must equal ``r_s + r_p`` and ``r_r - r_p`` (model.md; the angles and
+    ``r_c`` of :func:`line_geometry`, which a tooth geometry satisfies). Where one
     differs by more than 0.1% of ``r_c``, the static loads leak torque into the housing
     springs; each message names the stage, the three lengths and the keys that set them."""
     out = []
     where = train.source or train.name
     for s in train.stages:
         r_s, r_p, r_r = (float(np.asarray(r)) for r in s.base_radii())
-        r_c = float(np.asarray(s.carrier_radius()))
-        lever = r_c * math.cos(math.radians(float(np.asarray(s.pressure_angle_deg))))
-        off = {side: d for side, d in (("sun", r_s + r_p), ("ring", r_r - r_p))
-               if abs(d - lever) > 1e-3 * r_c}
+        a_s, a_r, r_c = (float(np.asarray(v)) for v in line_geometry(s))
+        lever = r_c * math.cos(a_s)
+        off = {side: d for side, d, a in (("sun", r_s + r_p, a_s), ("ring", r_r - r_p, a_r))
+               if abs(d - r_c * math.cos(a)) > 1e-3 * r_c}
         if off:
             shown = ", ".join(f"{'r_s + r_p' if side == 'sun' else 'r_r - r_p'} = "
                               f"{d * 1e3:.4g} mm" for side, d in off.items())

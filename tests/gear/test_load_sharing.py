@@ -1,6 +1,7 @@
-"""Load sharing among planets with pin position errors (translational model): the
-static results of Kahraman (1994, Mech. Mach. Theory 29, 1151-1165) that follow from
-the force balance alone, against closed forms.
+"""Load sharing among planets with pin position errors (translational model, and the
+torsional model's equivalent mean transmission error): the static results of Kahraman
+(1994, Mech. Mach. Theory 29, 1151-1165) that follow from the force balance alone,
+against closed forms.
 
 With rigid bearings and one stage (sun driven, ring braked), planet ``i``'s sun-mesh
 deflection is ``d_si = D - e_i cos(alpha)`` plus the ring mesh's share: its moment
@@ -30,7 +31,7 @@ RIGID = 1e15
 """Bearing stiffness (N/m) of the rigid limit: 1e6 times the meshes'."""
 
 
-def _stage(angles, errors_um, sun_bearing=RIGID, model="translational"):
+def _stage(angles, errors_um, sun_bearing=RIGID, model="translational", radial=None):
     def change(raw):
         raw["model"] = model
         s = raw["stages"][0]
@@ -39,6 +40,8 @@ def _stage(angles, errors_um, sun_bearing=RIGID, model="translational"):
         s["bearing_stiffness"] = {"sun": sun_bearing, "ring": RIGID, "carrier": RIGID,
                                   "planet": RIGID}
         s["planet_position_error_um"] = {"tangential": list(errors_um)}
+        if radial is not None:
+            s["planet_position_error_um"]["radial"] = list(radial)
     return mutate(HELICOPTER, change)
 
 
@@ -63,9 +66,12 @@ def test_equal_spacing_without_errors_shares_equally():
     assert loads.load_sharing["main"] == pytest.approx(1.0, abs=1e-7)
 
 
-def test_a_tangential_pin_error_loads_the_planets_as_the_static_equations_give():
+@pytest.mark.parametrize("model", ["translational", "torsional"])
+def test_a_tangential_pin_error_loads_the_planets_as_the_static_equations_give(model):
+    """The torsional model takes the error as a mean transmission error on both meshes
+    of the planet (``assembly.pin_te``): the same closed form, without bearings."""
     errors = [25.0, 0.0, 0.0]
-    train = _load(_stage([0, 120, 240], errors))
+    train = _load(_stage([0, 120, 240], errors, model=model))
     forces, loads = _sun_forces(train)
     s = train.stages[0]
     k_s, k_r = float(s.mesh_stiffness.sun), float(s.mesh_stiffness.ring)
@@ -93,9 +99,22 @@ def test_a_floating_sun_lowers_the_load_sharing_factor_of_four_planets():
     assert 1.0 < floating["main"] < fixed["main"]
 
 
-def test_pin_errors_need_the_translational_model():
-    text = _stage([0, 72, 144, 216, 288], [10.0, 0, 0, 0, 0], model="torsional")
-    refuse(_load, text, "main.planet_position_error_um", "10.0", "translational")
+def test_the_torsional_model_shares_as_the_translational_one_with_rigid_bearings():
+    """Five planets, errors on two: the two models' static sun-mesh forces agree to the
+    rigid limit's 1e-6 (bearings 1e6 times the meshes' stiffness)."""
+    errors = [20.0, -10.0, 0.0, 0.0, 0.0]
+    angles = [0, 72, 144, 216, 288]
+    translational, _ = _sun_forces(_load(_stage(angles, errors)))
+    torsional, loads = _sun_forces(_load(_stage(angles, errors, model="torsional")))
+    np.testing.assert_allclose(torsional, translational, rtol=1e-5)
+    assert loads.load_sharing["main"] == pytest.approx(torsional.max() / torsional.mean())
+    assert loads.load_sharing["main"] > 1.05
+
+
+def test_radial_pin_errors_need_the_translational_model():
+    text = _stage([0, 72, 144, 216, 288], [0.0] * 5, model="torsional",
+                  radial=[10.0, 0, 0, 0, 0])
+    refuse(_load, text, "main.planet_position_error_um.radial", "10.0", "translational")
 
 
 def test_one_error_per_planet():

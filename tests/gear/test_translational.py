@@ -14,6 +14,7 @@ import pytest
 import gearjax as gj
 from gearjax import TrainError, assemble, dumps_train, loads_train
 from gearjax._engine.modal import modes
+from gearjax._gear.translational import line_geometry
 from train_refusals import mutate, refuse
 
 DATA = Path(__file__).parent.parent / "data"
@@ -218,3 +219,34 @@ def test_modes_says_where_unequal_spacing_breaks_the_mode_types(tmp_path, capsys
     assert main(["modes", str(path)]) == 0
     out = capsys.readouterr().out
     assert "mode families: overall 18" in out and "planets unequally spaced" in out
+
+
+@pytest.mark.slow
+def test_a_profile_shifted_stage_turns_rigidly_on_its_operating_lines_of_action():
+    """Slow alone (about 14 s on 2 cores: loading and assembling a stage with tooth
+    geometry compiles the potential-energy programs, which the tooth-geometry tests
+    share). Profile shifts move the centre distance and the pressure angle of each mesh: on
+    the operating angles and centre distance (``line_geometry``) a rigid rotation of the
+    stage (every member turning by one radian, the planet centres carried along)
+    deflects no mesh and no pin, as model.md requires, and the static torques balance;
+    with the generating 20 degrees the sun mesh would strain."""
+    text = _translational((DATA / "geometry_stage.toml").read_text(), 1e9,
+                          profile_shift={"sun": 0.3, "planet": 0.0, "ring": -0.32})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", gj.GeometryWarning)
+        train = loads_train(text, source="shifted.toml")
+    stage = train.stages[0]
+    a_s, _, r_c = (float(v) for v in line_geometry(stage))
+    assert abs(a_s - np.deg2rad(20.0)) > 0.01  # both meshes at the one centre distance
+    system = assemble(train)
+    n_rot = 3 + stage.n_planets
+    rigid = np.zeros(system.n_dof)
+    rigid[:n_rot] = 1.0
+    rigid[n_rot + 7::2] = r_c  # each planet's tangential motion follows the carrier
+    r_s, r_p, _ = (float(r) for r in stage.base_radii())
+    np.testing.assert_allclose(np.asarray(system.W) @ rigid, 0.0, atol=1e-12 * r_c)
+    pins = np.asarray(system.spring_rows)[-2 * stage.n_planets:]
+    np.testing.assert_allclose(pins @ rigid, 0.0, atol=1e-12 * r_c)
+    assert abs(r_s + r_p - r_c * np.cos(np.deg2rad(20.0))) > 1e-4 * r_c
+    loads = gj.static_loads(train)
+    assert abs(loads.balance) < 1e-9 * abs(float(train.gears[0].input_torque))
