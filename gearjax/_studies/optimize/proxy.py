@@ -94,7 +94,8 @@ def first_order(system, omegas) -> FirstOrder:
     Hg = jnp.linalg.solve(A, jnp.broadcast_to(g, A.shape[:2] + g.shape[-1:])[..., None])[..., 0]
     forced = D * jnp.einsum("mn,fon->fom", s.W, Hg)
     return FirstOrder(transfer=transfer, forced=forced, omegas=omegas,
-                      static_p=s.W @ x_static - s.te_mean, kbar=s.kbar, damping=s.damping, **fo_static)
+                      static_p=s.W @ x_static - s.te_mean, kbar=s.kbar, damping=s.damping,
+                      **fo_static)
 
 
 def _forcing_orders(s, tones) -> Array:
