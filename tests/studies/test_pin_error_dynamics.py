@@ -17,6 +17,8 @@ import pytest
 
 import gearjax as gj
 from gearjax import loads_train
+from gearjax._studies import sensitivity as S
+from sensitivity_differences import finite_differences
 from train_refusals import mutate
 
 DATA = Path(__file__).parent.parent / "data"
@@ -82,3 +84,23 @@ def test_torsional_pin_errors_agree_with_integration():
     mean_ni = result.ni["mean_force"].values
     np.testing.assert_allclose(mean_ni, mean_hb, rtol=0.01)
     assert mean_hb[0, 1] > 1.05 * np.mean(mean_hb[0, :5]) > 1.05 * mean_hb[0, 0]
+
+
+@pytest.mark.slow
+def test_response_derivative_to_a_pin_error_matches_finite_differences():
+    """Slow (about 15 s on 2 cores, nearly all compiling the implicit derivative's
+    programs; the only derivative through ``te_mean``). d(RMS force of planet 1's sun
+    mesh)/d(its pin error) through the mean transmission errors and the harmonic balance
+    (torsional, linear, K = 4, 1200 Hz) against central differences of the re-solved
+    response (the design use: how much a pin tolerance moves a dynamic force)."""
+    train = _helicopter("torsional")
+    paths = ("main.planet_position_error_um.tangential.1",)
+    with warnings.catch_warnings():  # K = 4: the claim is the derivative of these
+        warnings.simplefilter("ignore", gj.TruncationWarning)  # equations, at any K
+        result = S.sensitivity(train, "flight", at_hz=1200.0, mesh="main.sp1",
+                               paths=paths, harmonics=4, linear=True)
+    assert result.ok, result.message
+    fd, noise = finite_differences(train, result, linear=True)
+    assert np.all(np.abs(fd * np.asarray(result.values)) > 1e-3 * abs(result.value))
+    err = np.abs(np.asarray(result.derivative) - fd)
+    assert np.all(err <= 1e-5 * np.abs(fd) + noise), (result.derivative, fd)
