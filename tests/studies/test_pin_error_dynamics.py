@@ -88,7 +88,7 @@ def test_torsional_pin_errors_agree_with_integration():
 
 @pytest.mark.slow
 def test_response_derivative_to_a_pin_error_matches_finite_differences():
-    """Slow (about 15 s on 2 cores, nearly all compiling the implicit derivative's
+    """Slow (10-15 s on 2 cores, nearly all compiling the implicit derivative's
     programs; the only derivative through ``te_mean``). d(RMS force of planet 1's sun
     mesh)/d(its pin error) through the mean transmission errors and the harmonic balance
     (torsional, linear, K = 4, 1200 Hz) against central differences of the re-solved
