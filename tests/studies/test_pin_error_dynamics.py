@@ -1,6 +1,7 @@
 """Pin position errors in motion: the torsional model's mean transmission errors
-(``assembly.pin_te``) against the translational model with rigid bearings, and its
-harmonic balance against the project's time integration.
+(``assembly.pin_te``) against the translational model with rigid bearings, its
+harmonic balance against the project's time integration, and a derivative through them
+against finite differences.
 
 With pins 1e6 times stiffer than the meshes the translational model's planets move as
 the torsional model's do, so the two models' mesh forces agree to that limit at every
