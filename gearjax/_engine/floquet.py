@@ -177,20 +177,23 @@ def floquet_steps(problem: HBProblem, per_harmonic: int = 32) -> int:
     return int(CHUNK * math.ceil(need / CHUNK))
 
 
-def _mesh_series(cos: Array, sin: Array, mu: Array, omega, t: Array):
-    """Value and rate of ``sum_h cos_h cos(h mu Omega t) + sin_h sin(...)`` with a time per mesh.
+def _transmission_error(system, mu: Array, omega, t: Array):
+    """Transmission error ``e`` (m) and its time rate with a time per mesh: ``te_mean +
+    sum_h te_cos_h cos(h mu Omega t) + te_sin_h sin(...)``.
 
-    ``cos``, ``sin``: ``(m, H)``; ``t``: ``(..., m)``.
+    ``mu`` ``(m,)``; ``t``: ``(..., m)`` or ``(..., 1)`` -> two ``(..., m)`` arrays.
     """
+    cos, sin = system.te_cos, system.te_sin
+    mean = jnp.broadcast_to(system.te_mean, jnp.broadcast_shapes(t.shape, system.te_mean.shape))
     H = cos.shape[-1]
     if H == 0:
-        return jnp.zeros_like(t), jnp.zeros_like(t)
+        return mean, jnp.zeros_like(mean)
     f = jnp.arange(1, H + 1)[None, :] * mu[:, None] * omega  # (m, H)
     arg = t[..., None] * f  # (..., m, H)
     c, s = jnp.cos(arg), jnp.sin(arg)
     value = jnp.sum(cos * c + sin * s, axis=-1)
     rate = jnp.sum(f * (sin * c - cos * s), axis=-1)
-    return value, rate
+    return mean + value, rate
 
 
 class _Orbit(eqx.Module):
@@ -207,8 +210,8 @@ class _Orbit(eqx.Module):
         s = self.problem.system
         rates = jnp.asarray(s.mesh_rates(), dtype=float)
         p, dp = _line_series(self.P, self.problem.basis, self.w0, t)
-        e, de = _mesh_series(s.te_cos, s.te_sin, rates, self.omega, t)
-        return p - s.te_mean - e, dp - de
+        e, de = _transmission_error(s, rates, self.omega, t)
+        return p - e, dp - de
 
     def on_grid(self, n: int):
         """Deflection and rate ``(n, m)`` at the ``n`` equally spaced instants ``t_j = j S /
@@ -229,8 +232,8 @@ class _Orbit(eqx.Module):
             dp = self.w0 * ((c * nu) @ b - (s_ * nu) @ a)
         rates = jnp.asarray(s.mesh_rates(), dtype=float) * eta
         tau = jnp.asarray(2 * np.pi * self.turns * np.arange(n) / n)
-        e, de = _mesh_series(s.te_cos, s.te_sin, rates, 1.0, tau[:, None])
-        return p - s.te_mean - e, dp - self.w0 * de
+        e, de = _transmission_error(s, rates, 1.0, tau[:, None])
+        return p - e, dp - self.w0 * de
 
 
 def _line_series(C: Array, basis, w0, t: Array):

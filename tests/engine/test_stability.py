@@ -477,3 +477,23 @@ def test_expm_taylor_18_in_five_products():
         for a, e in zip(A, E):
             ref = scipy.linalg.expm(a)
             assert np.abs(e - ref).sum(axis=0).max() < 2e-14 * np.abs(ref).sum(axis=0).max()
+
+
+def test_floquet_orbit_deflections_are_the_harmonic_balance_samples_with_a_mean_te():
+    """The monodromy integrates along the orbit's mesh deflections ``w . x - e``: with a
+    mean transmission error (``te_mean``) beside its harmonics they equal, sample for
+    sample, those the harmonic balance's AFT uses, and so does the end point."""
+    system = gj.system_from_matrices(
+        [[1.0, 0.0], [0.0, 2.0]], [[0.05, 0.0], [0.0, 0.05]], [[2.0, -1.0], [-1.0, 2.0]],
+        [[1.0, -1.0], [0.5, 1.0]], [1.0, 2.0], k_cos=[[0.2], [0.1]], mesh_mu=[1, 2],
+        te_mean=[0.3, -0.2], te_cos=[[0.05], [0.02]], te_sin=[[0.01], [0.0]])
+    problem = _hb.hb_problem(system, _hb.HarmonicBalance(n_harmonics=6))
+    X = jnp.asarray(np.random.default_rng(0).normal(size=(13, 2)))
+    omega = jnp.asarray(1.3)
+    P = X @ system.W.T
+    orbit = _floquet._Orbit(P=P, w0=omega, omega=omega, problem=problem)
+    p, dp, _ = _hb.mesh_samples(problem, P, omega)
+    on_grid = orbit.on_grid(problem.basis.n_samples)
+    np.testing.assert_allclose(on_grid[0], p.T, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(on_grid[1], dp.T, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(orbit.deflection(jnp.zeros(2))[0], p[:, 0], rtol=0, atol=1e-13)
