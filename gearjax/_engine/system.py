@@ -38,9 +38,8 @@ class System(eqx.Module):
     - ``kbar`` ``(m,)`` mean mesh stiffness (N/m); ``k_cos``, ``k_sin`` ``(m, H)``
       dimensionless stiffness Fourier coefficients of harmonics ``h mu_m Omega``;
     - ``backlash`` ``(m,)`` half clearance (m); ``damping`` ``(m,)`` mesh damping (N s/m);
-    - ``te_mean`` ``(m,)``: constant part of the transmission error (m; a planet pin
-      out of place in the torsional model); ``te_cos``, ``te_sin`` ``(m, H_e)``: its
-      harmonics, as the stiffness's;
+    - ``te_mean`` ``(m,)``: constant part of the transmission error (m); ``te_cos``,
+      ``te_sin`` ``(m, H_e)``: its harmonics, as the stiffness's;
     - ``mesh_radius`` ``(m,)``: lever arm (m) turning a mesh force into a torque;
     - ``f_mean`` ``(n,)``, ``f_cos``, ``f_sin`` ``(n, L)``: forcing (N m), column ``l``
       at ``forcing_mu[l] Omega``;
