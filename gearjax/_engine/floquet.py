@@ -108,7 +108,7 @@ from jaxtyping import Array, Complex
 
 from . import aft as _aft
 from .hb import HBProblem
-from .mesh_force import in_contact, stiffness_series
+from .mesh_force import in_contact, stiffness_series, transmission_error
 
 
 _GAUSS = 0.5 / np.sqrt(3.0)
@@ -177,25 +177,6 @@ def floquet_steps(problem: HBProblem, per_harmonic: int = 32) -> int:
     return int(CHUNK * math.ceil(need / CHUNK))
 
 
-def _transmission_error(system, mu: Array, omega, t: Array):
-    """Transmission error ``e`` (m) and its time rate with a time per mesh: ``te_mean +
-    sum_h te_cos_h cos(h mu Omega t) + te_sin_h sin(...)``.
-
-    ``mu`` ``(m,)``; ``t``: ``(..., m)`` or ``(..., 1)`` -> two ``(..., m)`` arrays.
-    """
-    cos, sin = system.te_cos, system.te_sin
-    mean = jnp.broadcast_to(system.te_mean, jnp.broadcast_shapes(t.shape, system.te_mean.shape))
-    H = cos.shape[-1]
-    if H == 0:
-        return mean, jnp.zeros_like(mean)
-    f = jnp.arange(1, H + 1)[None, :] * mu[:, None] * omega  # (m, H)
-    arg = t[..., None] * f  # (..., m, H)
-    c, s = jnp.cos(arg), jnp.sin(arg)
-    value = jnp.sum(cos * c + sin * s, axis=-1)
-    rate = jnp.sum(f * (sin * c - cos * s), axis=-1)
-    return mean + value, rate
-
-
 class _Orbit(eqx.Module):
     """Mesh deflections ``p_m(t)`` of the solution along its line ``theta = rates omega_0 t``
     (one period of a periodic solution, ``turns`` turns of the base angle on a torus)."""
@@ -207,11 +188,12 @@ class _Orbit(eqx.Module):
     turns: int = eqx.field(static=True, default=1)
 
     def deflection(self, t):
+        """Deflection and time rate ``(m,)`` at time ``t`` (s, scalar) along the line."""
         s = self.problem.system
         rates = jnp.asarray(s.mesh_rates(), dtype=float)
-        p, dp = _line_series(self.P, self.problem.basis, self.w0, t)
-        e, de = _transmission_error(s, rates, self.omega, t)
-        return p - e, dp - de
+        p, dp = _line_series(self.P, self.problem.basis, self.w0, self.w0 * t)
+        e, de = transmission_error(s.te_mean, s.te_cos, s.te_sin, rates, self.omega * t)
+        return p - e, dp - self.omega * de
 
     def on_grid(self, n: int):
         """Deflection and rate ``(n, m)`` at the ``n`` equally spaced instants ``t_j = j S /
@@ -220,34 +202,28 @@ class _Orbit(eqx.Module):
         line; the transmission error evaluated in phase (it does not depend on ``Omega``)."""
         s, basis = self.problem.system, self.problem.basis
         eta = self.problem.settings.eta
+        tau = jnp.asarray(2 * np.pi * self.turns * np.arange(n) / n)
         if basis.G == 1 and self.turns == 1:
             p = _aft.synthesis(self.P, n)
             dp = self.w0 * _aft.synthesis(_aft.derivative(self.P), n)
-        else:  # the line's basis functions at the steps (no Omega in them), times P
-            tau = 2 * np.pi * self.turns * np.arange(n) / n
-            nu = jnp.asarray(_aft.frequency_numbers(basis)[1::2])
-            c, s_ = jnp.cos(tau[:, None] * nu), jnp.sin(tau[:, None] * nu)  # (n, P)
-            a, b = self.P[1::2], self.P[2::2]
-            p = self.P[0] + c @ a + s_ @ b
-            dp = self.w0 * ((c * nu) @ b - (s_ * nu) @ a)
+        else:  # the line's basis functions at the steps, in phase (no Omega in them)
+            p, dp = _line_series(self.P, basis, self.w0, tau)
         rates = jnp.asarray(s.mesh_rates(), dtype=float) * eta
-        tau = jnp.asarray(2 * np.pi * self.turns * np.arange(n) / n)
-        e, de = _transmission_error(s, rates, 1.0, tau[:, None])
-        return p - e, dp - self.w0 * de
+        e, de = transmission_error(s.te_mean, s.te_cos, s.te_sin, rates, tau)
+        return p - e.T, dp - self.w0 * de.T
 
 
-def _line_series(C: Array, basis, w0, t: Array):
+def _line_series(C: Array, basis, w0, phase):
     """Value and time derivative of the function with coefficients ``C`` ``(2P+1, m)`` on
-    ``basis`` along the line ``theta = rates w0 t``: ``C[0] + sum_j C[2j-1] cos(nu_j w0 t)
-    + C[2j] sin(nu_j w0 t)``, ``nu_j`` the frequency numbers (the harmonics ``1..K`` of a
-    periodic basis). ``t``: ``(..., m)`` or ``(..., 1)`` -> two ``(..., m)`` arrays."""
+    ``basis`` along the line ``theta = rates w0 t``, at phases ``phase = w0 t`` (rad,
+    scalar or ``(n,)``): ``C[0] + sum_j C[2j-1] cos(nu_j phase) + C[2j] sin(nu_j phase)``,
+    ``nu_j`` the frequency numbers (the harmonics ``1..K`` of a periodic basis).
+    **Returns:** two ``(m,)`` (or ``(n, m)``) arrays."""
     nu = jnp.asarray(_aft.frequency_numbers(basis)[1::2])
-    arg = w0 * t[..., None, :] * nu[:, None]  # (..., P, m)
+    arg = jnp.asarray(phase)[..., None] * nu  # (..., P)
     c, s = jnp.cos(arg), jnp.sin(arg)
     a, b = C[1::2], C[2::2]
-    value = C[0] + jnp.sum(a * c + b * s, axis=-2)
-    rate = w0 * jnp.sum(nu[:, None] * (b * c - a * s), axis=-2)
-    return value, rate
+    return C[0] + c @ a + s @ b, w0 * ((c * nu) @ b - (s * nu) @ a)
 
 
 def _contact_intervals(p0, p1, dp0, dp1, h, b):
@@ -494,7 +470,7 @@ def monodromy_scaled(problem: HBProblem, X, omega, n_steps: int | None, frame=No
     # sample, as in the periodic case; on a torus the true end lies within the drift
     ends = tuple(by_chunk(a) for a in (p, jnp.roll(p, -1, axis=0), dp, jnp.roll(dp, -1, axis=0)))
     if turns > 1 or problem.basis.G > 1:
-        p_end, dp_end = orbit.deflection(jnp.full((s.n_meshes,), turns * 2 * jnp.pi / w0))
+        p_end, dp_end = orbit.deflection(turns * 2 * jnp.pi / w0)
         ends = (ends[0], ends[1].at[-1, -1].set(p_end), ends[2], ends[3].at[-1, -1].set(dp_end))
     # the stiffness at the two Gauss points of every step, in phase: the same for every
     # Omega, so under vmap over the points of a sweep it is evaluated once
@@ -517,9 +493,8 @@ def _to_physical(problem, frame, orbit):
     s = problem.system
     n = s.n_dof
     LinvT = frame.Linv.T
-    t0 = jnp.zeros((s.n_meshes,))
     if s.contact_damping:
-        p, _ = orbit.deflection(t0)
+        p, _ = orbit.deflection(0.0)
         hm = in_contact(p, s.backlash)
     else:
         hm = jnp.ones((s.n_meshes,))

@@ -496,4 +496,4 @@ def test_floquet_orbit_deflections_are_the_harmonic_balance_samples_with_a_mean_
     on_grid = orbit.on_grid(problem.basis.n_samples)
     np.testing.assert_allclose(on_grid[0], p.T, rtol=0, atol=1e-13)
     np.testing.assert_allclose(on_grid[1], dp.T, rtol=0, atol=1e-13)
-    np.testing.assert_allclose(orbit.deflection(jnp.zeros(2))[0], p[:, 0], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(orbit.deflection(0.0)[0], p[:, 0], rtol=0, atol=1e-13)
