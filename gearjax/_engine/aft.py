@@ -30,6 +30,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .programs import one_program
+
 TRUNCATIONS = ("box", "diamond")
 """Truncation sets: ``box`` ``|k_g| <= K_g``; ``diamond`` ``sum_g |k_g| / K_g <= 1``."""
 
@@ -228,6 +230,7 @@ def angles(basis: Basis) -> np.ndarray:
 # ------------------------------------------------------------ the AFT on the torus
 
 
+@one_program
 def torus_synthesis(basis: Basis, X: jnp.ndarray) -> jnp.ndarray:
     """Samples ``(T_1 ... T_G, ...)`` of the function with coefficients ``X``
     ``(2P+1, ...)`` on the grid of ``basis`` (:func:`angles`)."""
@@ -250,6 +253,7 @@ def torus_synthesis(basis: Basis, X: jnp.ndarray) -> jnp.ndarray:
     return jnp.moveaxis(x.reshape(lead + (n,)), -1, 0)
 
 
+@one_program
 def torus_analysis(basis: Basis, x: jnp.ndarray) -> jnp.ndarray:
     """Coefficients ``(2P+1, ...)`` of samples ``x`` ``(T_1 ... T_G, ...)`` on the grid of
     ``basis``."""
@@ -270,6 +274,7 @@ def torus_analysis(basis: Basis, x: jnp.ndarray) -> jnp.ndarray:
     return jnp.moveaxis(out, -1, 0)
 
 
+@one_program
 def torus_product_matrix(basis: Basis, a: jnp.ndarray) -> jnp.ndarray:
     """``M`` with ``analysis(a * synthesis(X)) == M @ X``: multiplication by the sampled
     function ``a`` ``(..., T_1 ... T_G)`` (samples on the last axis), ``(..., 2P+1, 2P+1)``.
@@ -295,6 +300,7 @@ def torus_product_matrix(basis: Basis, a: jnp.ndarray) -> jnp.ndarray:
                            axis=-2)
 
 
+@one_program
 def torus_derivative(basis: Basis, X: jnp.ndarray) -> jnp.ndarray:
     """Coefficients of ``dx/dt / omega_0``: ``cos_j <- nu_j sin_j``, ``sin_j <- -nu_j cos_j``."""
     nu = jnp.asarray(frequency_numbers(basis)[1::2]).reshape((-1,) + (1,) * (X.ndim - 1))
@@ -303,6 +309,7 @@ def torus_derivative(basis: Basis, X: jnp.ndarray) -> jnp.ndarray:
     return out.at[2::2].set(-nu * X[1::2])
 
 
+@one_program
 def torus_times_derivative(basis: Basis, M: jnp.ndarray) -> jnp.ndarray:
     """``M @ torus_derivative_matrix(basis)`` for ``M`` ``(..., r, 2P+1)``, by columns."""
     nu = jnp.asarray(frequency_numbers(basis)[1::2])

@@ -7,9 +7,11 @@ import dataclasses
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from . import aft as _aft
+from .programs import one_program
 from .static import static_deflection
 from .system import System
 
@@ -45,12 +47,17 @@ def hb_initial_state(X: Float[Array, "C n"], omega, eta: int = 1, basis=None):
     """
     X = jnp.asarray(X)
     if basis is None:
-        k = jnp.arange(1, (X.shape[0] - 1) // 2 + 1)[:, None]
+        k = np.arange(1, (X.shape[0] - 1) // 2 + 1)
     else:
-        k = jnp.asarray(_aft.frequency_numbers(basis)[2::2])[:, None]
-    x0 = X[0] + jnp.sum(X[1::2], axis=0)
-    v0 = (omega / eta) * jnp.sum(k * X[2::2], axis=0)
-    return x0, v0
+        k = _aft.frequency_numbers(basis)[2::2]
+    return _state_at_zero(X, jnp.asarray(omega, dtype=float) / eta, k.astype(float))
+
+
+@one_program
+def _state_at_zero(X, rate, k):
+    """``(x(0), x'(0))`` of coefficients ``X`` ``(2P+1, n)`` whose pair ``j`` turns at
+    ``k_j`` times ``rate`` (rad/s): one program, not one per operation."""
+    return X[0] + jnp.sum(X[1::2], axis=0), rate * jnp.sum(k[:, None] * X[2::2], axis=0)
 
 
 def start_state(system: System, x0, v0):

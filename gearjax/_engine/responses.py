@@ -32,6 +32,7 @@ from jaxtyping import Array, Float
 
 from .hb import HBProblem, hb_problem, mesh_samples
 from .mesh_force import in_contact
+from .programs import one_program
 from .static import static_deflection
 from .system import System
 
@@ -77,6 +78,7 @@ RESPONSE_UNITS = {
 """Unit of every response field (``"1"``: dimensionless, shares of the period)."""
 
 
+@one_program
 def responses_from_samples(
     p: Float[Array, "*batch m T"],
     F: Float[Array, "*batch m T"],
@@ -151,9 +153,7 @@ def mesh_time_history(
     the mesh force (N) at ``t_j = (2 pi eta / Omega) j / T``, from the one shared
     :func:`~gearjax.mesh_force`.
     """
-    if n_time is not None and n_time != problem.n_time:
-        problem = hb_problem(problem.system, dataclasses.replace(problem.settings, n_time=n_time))
-    return mesh_samples(problem, X @ problem.system.W.T, omega)
+    return _time_history(_on_grid(problem, n_time), X, omega)
 
 
 def mesh_responses(
@@ -173,7 +173,24 @@ def mesh_responses(
     points, ``jax.vmap(mesh_responses, in_axes=(None, 0, 0, None))(problem, Xs,
     omegas, F_static)`` gives fields ``(P, m)``.
     """
-    p, _, F = mesh_time_history(problem, X, omega, n_time)
+    return _responses(_on_grid(problem, n_time), X, omega, F_static)
+
+
+def _on_grid(problem: HBProblem, n_time: int | None) -> HBProblem:
+    """``problem`` with ``n_time`` samples on its grid (``None``: as it is)."""
+    if n_time is not None and n_time != problem.n_time:
+        problem = hb_problem(problem.system, dataclasses.replace(problem.settings, n_time=n_time))
+    return problem
+
+
+@one_program
+def _time_history(problem: HBProblem, X, omega):
+    return mesh_samples(problem, X @ problem.system.W.T, omega)
+
+
+@one_program
+def _responses(problem: HBProblem, X, omega, F_static) -> MeshResponses:
+    p, _, F = _time_history(problem, X, omega)
     s = problem.system
     return responses_from_samples(p, F, s.backlash, F_static, s.mesh_radius)
 

@@ -160,7 +160,7 @@ def integrate(case: GearCase, f_hz, is_sweep: bool, x0=None, v0=None,
                      f"{int(np.asarray(tr.stats['num_steps'])[0])} solver steps, "
                      f"{result_word(tr.result)[0]}; {now - t0:.0f} s, about "
                      f"{(now - t0) / (i + 1) * (P - i - 1):.0f} s left")
-    return jax.tree.map(lambda *a: jnp.concatenate(a), *parts)
+    return jax.tree.map(lambda *a: jax.device_put(np.concatenate(a)), *parts)  # no program per P
 
 
 def trajectory_dataset(case: GearCase, f_hz, tr: td.Trajectory, solver: dict | None = None,

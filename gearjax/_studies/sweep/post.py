@@ -9,7 +9,6 @@ after it, with the same chunks and the same compiled programs either way.
 from __future__ import annotations
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from ..._engine.kept import kept_program
@@ -54,10 +53,11 @@ def point_rows(problem, Xs, omegas, results, F_static, done=()):
     ``stable``, ``max_multiplier``, ``multipliers``, ``excluded``."""
     P = len(omegas)
     pad = -P % POST_CHUNK
-    Xs, omegas_p = jnp.asarray(Xs), jnp.asarray(omegas)
+    # host arrays: padding and chunking on the device would each be a program per P
+    Xs, omegas_p = np.asarray(Xs), np.asarray(omegas)
     if pad:
-        Xs = jnp.concatenate([Xs, jnp.repeat(Xs[-1:], pad, axis=0)])
-        omegas_p = jnp.concatenate([omegas_p, jnp.repeat(omegas_p[-1:], pad)])
+        Xs = np.concatenate([Xs, np.repeat(Xs[-1:], pad, axis=0)])
+        omegas_p = np.concatenate([omegas_p, np.repeat(omegas_p[-1:], pad)])
     basis = verdict_basis(problem)
     size = POST_CHUNK
 
@@ -73,7 +73,7 @@ def point_rows(problem, Xs, omegas, results, F_static, done=()):
     parts += concurrency.map_in_threads(chunk, starts, POST_THREAD)
     resp, stab = jax.tree.map(lambda *a: np.concatenate(a)[:P], *parts)
     return {"responses": resp, "omega": np.asarray(omegas), "result": np.asarray(results),
-            "X": list(np.asarray(Xs[:P])), "K": _orders_rows(problem, P),
+            "X": list(Xs[:P]), "K": _orders_rows(problem, P),
             "stable": np.asarray(stab.stable), "max_multiplier": np.asarray(stab.max_abs),
             "multipliers": np.asarray(stab.multipliers), "excluded": np.asarray(stab.excluded)}
 
@@ -150,10 +150,10 @@ def _orders_rows(problem, P: int) -> np.ndarray:
 
 def point_arrays(problem, omega_ref: float, pts: list[dict]):
     """Unscaled solutions ``(P, C, n)`` and base frequencies ``(P,)`` (rad/s) of journal
-    point records (``y``, ``lam``)."""
-    Xs = jnp.asarray(np.stack([p["y"] for p in pts])).reshape(
-        (-1,) + problem.shape) * problem.x_scale
-    return Xs, jnp.asarray(np.array([p["lam"] for p in pts]) * omega_ref)
+    point records (``y``, ``lam``), host arrays."""
+    Xs = np.stack([p["y"] for p in pts]).reshape((-1,) + problem.shape) * np.asarray(
+        problem.x_scale)
+    return Xs, np.array([p["lam"] for p in pts]) * omega_ref
 
 
 def bifurcations(f_hz, stable, multipliers, excluded, branch=None, torus: bool = False,

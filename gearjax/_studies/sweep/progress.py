@@ -108,10 +108,10 @@ class SweepProgress:
 def progress_bar(from_hz: float, to_hz: float, stream=None, *,
                  quiet: bool = False) -> SweepProgress:
     """The progress of a sweep from ``from_hz`` to ``to_hz`` (Hz) on ``stream`` (default:
-    ``sys.stderr`` when called) (:class:`SweepProgress`): a tqdm bar where ``stream`` is a terminal and not
-    ``quiet`` (the command line's ``--json``), and one final line on :meth:`~SweepProgress.close`
-    in every case. Pass it as the sweep's ``progress`` and close it after (or use it as
-    a context manager)."""
+    ``sys.stderr`` when called) (:class:`SweepProgress`): a tqdm bar where ``stream`` is a
+    terminal and not ``quiet`` (the command line's ``--json``), and one final line on
+    :meth:`~SweepProgress.close` in every case. Pass it as the sweep's ``progress`` and
+    close it after (or use it as a context manager)."""
     stream = sys.stderr if stream is None else stream
     isatty = getattr(stream, "isatty", None)
     return SweepProgress(from_hz, to_hz, stream,

@@ -206,14 +206,14 @@ def solve_points(problem, omegas):
     with backlash; one point after the other (``lax.map``: a vmapped batch of dense
     factorisations is slower on a CPU). Returns an ``HBSolution`` batched over ``P``."""
     solve = _newton_points if problem.system.has_backlash else _linear_points
-    omegas = jnp.asarray(omegas)
+    omegas = np.asarray(omegas, dtype=float)  # host: chunks of any P with no program of their own
     P = omegas.shape[0]
     if P <= 1:
         return solve(problem, omegas)
-    padded = jnp.concatenate([omegas, jnp.repeat(omegas[-1:], -P % POINTS_CHUNK)])
+    padded = np.concatenate([omegas, np.repeat(omegas[-1:], -P % POINTS_CHUNK)])
     chunks = [solve(problem, padded[i:i + POINTS_CHUNK])
               for i in range(0, padded.shape[0], POINTS_CHUNK)]
-    return jax.tree.map(lambda *parts: jnp.concatenate(parts)[:P], *chunks)
+    return jax.tree.map(lambda *parts: jax.device_put(np.concatenate(parts)[:P]), *chunks)
 
 
 @kept_program
