@@ -160,7 +160,18 @@ def integrate(case: GearCase, f_hz, is_sweep: bool, x0=None, v0=None,
                      f"{int(np.asarray(tr.stats['num_steps'])[0])} solver steps, "
                      f"{result_word(tr.result)[0]}; {now - t0:.0f} s, about "
                      f"{(now - t0) / (i + 1) * (P - i - 1):.0f} s left")
-    return jax.tree.map(lambda *a: jax.device_put(np.concatenate(a)), *parts)  # no program per P
+    return _joined(parts)
+
+
+def _joined(parts):
+    """Batched results ``parts`` joined along their leading axis, on the host and put back
+    with ``jax.device_put`` (``jnp.concatenate`` would compile a program per count)."""
+    return jax.tree.map(lambda *a: jax.device_put(np.concatenate(a)), *parts)
+
+
+def _stacked(outs):
+    """Per-point results ``outs`` stacked on a new leading axis, as :func:`_joined`."""
+    return jax.tree.map(lambda *a: jax.device_put(np.stack(a)), *outs)
 
 
 def trajectory_dataset(case: GearCase, f_hz, tr: td.Trajectory, solver: dict | None = None,
@@ -252,7 +263,7 @@ def integrate_windowed(case: GearCase, f_hz, is_sweep: bool, x0=None, v0=None,
     s = case.system
     omegas = case.omega(f_hz)
     if x0 is None:
-        x0, v0 = td.contact_state(s)
+        x0, v0 = td.contact_state_jit(s)
     x0 = jnp.asarray(x0, dtype=float)
     v0 = jnp.zeros_like(x0) if v0 is None else jnp.asarray(v0, dtype=float)
     if is_sweep:
@@ -263,7 +274,7 @@ def integrate_windowed(case: GearCase, f_hz, is_sweep: bool, x0=None, v0=None,
             tau += 2 * np.pi * int(out.windows) * out.plan.periods  # the clock goes on
             x, v = out.x_end, out.v_end
             outs.append(out)
-        return jax.tree.map(lambda *a: jnp.stack(a), *outs)
+        return _stacked(outs)
     size = _batch_size(batch_size)
     if size != 1:
         return wd.simulate_windowed_points(s, omegas, x0=x0, v0=v0, settings=settings,
@@ -272,7 +283,7 @@ def integrate_windowed(case: GearCase, f_hz, is_sweep: bool, x0=None, v0=None,
     v0 = jnp.broadcast_to(v0, (len(omegas), s.n_dof))
     outs = [wd.simulate_windowed(s, float(w), x0=x0[i], v0=v0[i], settings=settings)
             for i, w in enumerate(omegas)]
-    return jax.tree.map(lambda *a: jnp.stack(a), *outs)
+    return _stacked(outs)
 
 
 def windowed_dataset(case: GearCase, f_hz, out: wd.WindowedResponse,
