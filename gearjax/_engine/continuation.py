@@ -105,7 +105,7 @@ class SystemParameter(AbstractParameter):
 
 
 class Settings(eqx.Module):
-    """Continuation settings (static).
+    """Continuation settings.
 
     ``step``: first arclength step (scaled units: unknowns in characteristic
     lengths, lambda relative); ``min_step``, ``max_step``: bounds of the adaptive
@@ -120,17 +120,22 @@ class Settings(eqx.Module):
     ``reuse``: keep the factors of an earlier point for as long as they carry the corrector
     within ``fast`` iterations and the tangent refined with them is accurate
     (:func:`arclength_step`), instead of factorising at every point.
+
+    The counts and switches (``max_corrector``, ``fast``, ``slow``, ``single``,
+    ``reuse``) are static: a program each. The steps and tolerances are inputs of the
+    compiled step and start (:func:`continue_branch`): continuations of one problem with
+    other steps (a sweep of another band) run the same programs.
     """
 
-    step: float = eqx.field(static=True, default=0.02)
-    min_step: float = eqx.field(static=True, default=1e-7)
-    max_step: float = eqx.field(static=True, default=0.2)
-    max_dlambda: float = eqx.field(static=True, default=0.02)
+    step: float = 0.02
+    min_step: float = 1e-7
+    max_step: float = 0.2
+    max_dlambda: float = 0.02
     max_corrector: int = eqx.field(static=True, default=15)
     fast: int = eqx.field(static=True, default=5)
     slow: int = eqx.field(static=True, default=10)
-    rtol: float = eqx.field(static=True, default=1e-9)
-    fold_step: float = eqx.field(static=True, default=1e-3)
+    rtol: float = 1e-9
+    fold_step: float = 1e-3
     single: bool = eqx.field(static=True, default=False)
     reuse: bool = eqx.field(static=True, default=False)
 
@@ -572,5 +577,5 @@ class Trace:
 
 
 continue_compiled = kept_program(continue_compiled, static_argnums=(4, 5))
-_arclength_step_jit = kept_program(arclength_step, static_argnums=(2,))
-start_jit = kept_program(start, static_argnums=(4,))
+_arclength_step_jit = kept_program(arclength_step)
+start_jit = kept_program(start)

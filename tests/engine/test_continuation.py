@@ -64,13 +64,16 @@ def test_coexisting_branches_match_time_integration(branch):
     assert low_ref == pytest.approx(abs(0.03 / (1 - 0.75**2 + 0.075j)), rel=1e-6)
 
 
-def test_python_driver_matches_and_compiles_once(branch):
+def test_python_driver_matches_and_compiles_once_for_any_steps(branch):
     problem, settings = branch["problem"], branch["settings"]
     b1 = C.continue_branch(branch["param"], branch["y0"], 0.5, 0.6, settings, max_points=50)
-    n_before = C._arclength_step_jit._cache_size()
-    b2 = C.continue_branch(branch["param"], _newton.solve_hb(problem, 0.55).y, 0.55, 0.62, settings,
+    programs = [f._cache_size() for f in (C._arclength_step_jit, C.start_jit)]
+    # other steps and tolerances are inputs of the same programs (another band of a sweep)
+    other = dataclasses.replace(settings, step=0.04, max_step=0.25, max_dlambda=0.015,
+                                rtol=2e-9, fold_step=2e-3, min_step=1e-8)
+    b2 = C.continue_branch(branch["param"], _newton.solve_hb(problem, 0.55).y, 0.55, 0.62, other,
                            max_points=50)
-    assert C._arclength_step_jit._cache_size() == n_before  # same shapes: no recompilation
+    assert [f._cache_size() for f in (C._arclength_step_jit, C.start_jit)] == programs
     assert bool(b1.result == RESULTS.reached_end) and bool(b2.result == RESULTS.reached_end)
     # on the contact branch the response is linear: first harmonic 0.03 / (1 - w^2 + 0.1 i w)
     w = b1.omega[-1]
