@@ -4,7 +4,9 @@
   the studies, the files, the figures or the command line;
 - no import cycle, function-level imports included;
 - no module imports another module's private (underscore) names;
-- no module longer than ``MAX_LINES`` without the reason written in its docstring;
+- no module longer than ``MAX_LINES`` without the reason written in its docstring, and
+  none of the command line's modules longer at all;
+- the command line (``gearjax._cli``) is the top: no other module imports it;
 - benchmarks and notebooks use the public API (``import gearjax``) only.
 """
 
@@ -25,6 +27,7 @@ PACKAGE = pathlib.Path(gearjax.__file__).parent
 ROOT = PACKAGE.parent
 MAX_LINES = 600
 LONG_REASON = "Why this module is long:"
+CLI = "gearjax._cli"
 ENGINE_MAY_NOT_IMPORT = ("gearjax._gear", "gearjax._studies", "gearjax._io", "gearjax._plot",
                          "gearjax._cli")
 
@@ -153,6 +156,19 @@ def test_long_modules_say_why():
         if n > MAX_LINES and LONG_REASON not in doc:
             long.append(f"{name}: {n} lines")
     assert not long, f"modules over {MAX_LINES} lines without '{LONG_REASON}': {long}"
+
+
+def test_command_line_modules_are_short():
+    """The command line is a package of thin commands: each module under ``MAX_LINES``."""
+    long = [f"{name}: {MODULES[name].read_text().count(chr(10))} lines" for name in MODULES
+            if name.startswith(CLI) and MODULES[name].read_text().count("\n") > MAX_LINES]
+    assert not long, long
+
+
+def test_nothing_imports_the_command_line():
+    bad = [f"{name}:{line} imports {target}" for name in MODULES if not name.startswith(CLI)
+           for target, _, line in _imports(name) if target.startswith(CLI)]
+    assert not bad, "\n".join(bad)
 
 
 def _gearjax_imports(source: str):

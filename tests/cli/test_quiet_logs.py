@@ -29,7 +29,7 @@ XLA_LINE = re.compile(r"^[IWEF]\d{4} ")
 SCRIPT = f"""
 import logging, sys
 mode = sys.argv[1]
-import gearjax._cli as cli
+import gearjax._cli.app as cli  # console() calls this module's main
 import jax, jax.numpy as jnp
 
 def work():

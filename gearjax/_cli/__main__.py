@@ -1,0 +1,5 @@
+"""``python -m gearjax._cli``: the console script."""
+
+from .app import console
+
+console()
