@@ -3,7 +3,10 @@ simulate, verify, sensitivity, optimize, study, plot.
 
 The one package that knows flag names and exit codes: :mod:`.parser` declares every
 command's flags, :mod:`.words` translates the library's argument names into them, and
-each command's module parses nothing, calls the library and renders its report.
+each command's module parses nothing, calls the library and renders its report. A
+command is ``NAME_command(args, train, notes) -> exit code``: ``args`` the parsed
+command line, ``train`` the loaded train (``None`` for ``study`` and ``plot``, which read
+other files), ``notes`` the warnings said so far (the JSON ``warnings``).
 
 Exit codes: 0 finished; 2 bad input or usage (one line on stderr, no traceback);
 3 finished but nothing converged; 1 an internal error or a problem too large for the

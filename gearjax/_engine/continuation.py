@@ -19,6 +19,7 @@ would dominate).
 from __future__ import annotations
 
 import abc
+import dataclasses
 from collections.abc import Callable
 
 import equinox as eqx
@@ -401,14 +402,19 @@ def _held_or_fresh(attempt, empty, held, refactor, use_held, retry):
 
 
 class Branch(eqx.Module):
-    """Points of a continued branch (numpy arrays, in order along the branch).
+    """Points of a continued branch, in order along the branch: :func:`continue_branch`'s
+    (numpy arrays, ``P = n_points``) and :func:`continue_compiled`'s (arrays of the
+    program's fixed size ``P = max_points``; rows past ``n_points`` are padding, NaN in
+    ``lam``, ``omega``, ``fold_lam``, ``tangent`` and ``h``; :meth:`trimmed` drops them).
 
     ``y`` ``(P, N)``: scaled unknowns; ``lam`` ``(P,)``; ``omega`` ``(P,)`` base
     frequency (rad/s); ``steps`` ``(P,)`` corrector iterations; ``fold`` ``(P,)``: a fold
     lies between this point and the previous one; ``fold_lam`` ``(P,)`` its location
-    (NaN elsewhere); ``result``: why continuation ended, a
-    :class:`~gearjax._engine.results.RESULTS` item (``reached_end``, ``max_points``,
-    ``step_too_small``, ``nonfinite``, ``closed_loop``, or the one ``on_point`` gave).
+    (NaN elsewhere); ``tangent`` ``(P, N + 1)``: the unit tangent ``(dy/ds, d lambda/ds)``;
+    ``h`` ``(P,)``: the step the continuation would take next; ``result``: why
+    continuation ended, a :class:`~gearjax._engine.results.RESULTS` item
+    (``reached_end``, ``max_points``, ``step_too_small``, ``nonfinite``, ``closed_loop``,
+    or the one ``on_point`` gave); ``n_points``: the points found.
     """
 
     y: np.ndarray
@@ -420,6 +426,15 @@ class Branch(eqx.Module):
     tangent: np.ndarray
     h: np.ndarray
     result: RESULTS
+    n_points: int | Array
+
+    def trimmed(self) -> Branch:
+        """The points found, as numpy arrays (padding dropped); ``result`` as it is."""
+        n = int(self.n_points)
+        return dataclasses.replace(
+            self, **{f: np.asarray(getattr(self, f))[:n] for f in (
+                "y", "lam", "omega", "steps", "fold", "fold_lam", "tangent", "h")},
+            n_points=n)
 
 
 def distinct_folds(fold_lams, tol: float = 1e-3) -> np.ndarray:
@@ -439,34 +454,38 @@ def distinct_folds(fold_lams, tol: float = 1e-3) -> np.ndarray:
     return np.array(out)
 
 
+def _row(state: ArcState) -> dict:
+    """What :class:`Branch` keeps of a point (one row of each of its arrays)."""
+    return {"y": state.y, "lam": state.lam, "steps": state.steps, "fold": state.fold,
+            "fold_lam": state.fold_lam, "tangent": jnp.append(state.ty, state.tlam),
+            "h": state.h}
+
+
 def continue_compiled(param: AbstractParameter, y0, lam0, lam_end, settings: Settings,
-                      max_points: int = 500):
+                      max_points: int = 500) -> Branch:
     """The whole continuation as one compiled ``lax.while_loop`` (fixed buffers).
 
-    **Returns:** ``(ys (max_points, N), lams, folds, fold_lams, n_points, result)``;
-    rows past ``n_points`` are padding; ``result`` as :attr:`Branch.result`. Suited to
-    small systems (the clearance oscillator benchmark), where per-step Python overhead
-    would dominate. Compiled (``settings`` and ``max_points`` static); called outside a
-    trace, its program is kept between processes (:mod:`~gearjax._engine.kept`).
+    **Returns:** a :class:`Branch` of ``max_points`` rows, the first ``n_points`` the
+    points found (:meth:`Branch.trimmed`). Suited to small systems (the clearance
+    oscillator benchmark), where per-step Python overhead would dominate. Compiled
+    (``settings`` and ``max_points`` static); called outside a trace, its program is kept
+    between processes (:mod:`~gearjax._engine.kept`).
     """
     direction = jnp.sign(lam_end - lam0)
     state = start(param, y0, lam0, direction, settings)
-    N = y0.shape[0]
-    ys = jnp.zeros((max_points, N)).at[0].set(y0)
-    lams = jnp.full((max_points,), jnp.nan).at[0].set(lam0)
-    folds = jnp.zeros((max_points,), bool)
-    fold_lams = jnp.full((max_points,), jnp.nan)
+    first = _row(state)
+    rows = {k: jnp.full((max_points,) + jnp.shape(v), 0 if k in ("y", "steps", "fold")
+                        else jnp.nan, jnp.result_type(v)).at[0].set(v)
+            for k, v in first.items()}
 
     def cond(c):
         return ~c[-1][0]
 
     def body(c):
-        st, ys, lams, folds, fold_lams, n, _ = c
+        st, rows, n, _ = c
         new = arclength_step(param, st, settings)
-        ys = jnp.where(new.accepted, ys.at[n].set(new.y), ys)
-        lams = jnp.where(new.accepted, lams.at[n].set(new.lam), lams)
-        folds = jnp.where(new.accepted, folds.at[n].set(new.fold), folds)
-        fold_lams = jnp.where(new.accepted, fold_lams.at[n].set(new.fold_lam), fold_lams)
+        rows = {k: jnp.where(new.accepted, rows[k].at[n].set(v), rows[k])
+                for k, v in _row(new).items()}
         n = n + new.accepted.astype(n.dtype)
         past = (new.lam - lam_end) * direction >= 0
         nonfinite = ~jnp.all(jnp.isfinite(new.y))
@@ -477,12 +496,12 @@ def continue_compiled(param: AbstractParameter, y0, lam0, lam_end, settings: Set
             nonfinite, RESULTS.nonfinite,
             RESULTS.where(reached, RESULTS.reached_end,
                           RESULTS.where(full, RESULTS.max_points, RESULTS.step_too_small)))
-        return new, ys, lams, folds, fold_lams, n, (nonfinite | reached | full | small, result)
+        return new, rows, n, (nonfinite | reached | full | small, result)
 
-    init = (state, ys, lams, folds, fold_lams, jnp.asarray(1),
-            (jnp.asarray(False), RESULTS.successful))
-    _, ys, lams, folds, fold_lams, n, (_, result) = jax.lax.while_loop(cond, body, init)
-    return ys, lams, folds, fold_lams, n, result
+    init = (state, rows, jnp.asarray(1), (jnp.asarray(False), RESULTS.successful))
+    _, rows, n, (_, result) = jax.lax.while_loop(cond, body, init)
+    omega = jax.vmap(param.omega)(rows["lam"])
+    return Branch(**rows, omega=omega, result=result, n_points=n)
 
 
 def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Settings,
@@ -503,10 +522,13 @@ def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Setti
     direction = float(np.sign(lam_end - lam0))
     if state is None:
         state = start_jit(param, y0, lam0, direction, settings)
-    rows = [(np.asarray(state.y), float(state.lam), 0, False, np.nan,
-             np.concatenate([np.asarray(state.ty), [float(state.tlam)]]), float(state.h))]
-    trace = Trace(max_points, rows[0][0].size + 1)
-    trace.add(np.append(rows[0][0], rows[0][1]), rows[0][5])
+    host_row = lambda s: {k: np.asarray(v) for k, v in _row(s).items()}  # noqa: E731
+    # the first point counts no corrector steps and no fold (a resumed state's are those
+    # of the point it was saved at)
+    rows = [{**host_row(state), "steps": np.asarray(0), "fold": np.asarray(False),
+             "fold_lam": np.asarray(np.nan)}]
+    trace = Trace(max_points, rows[0]["tangent"].size)
+    trace.add(np.append(rows[0]["y"], rows[0]["lam"]), rows[0]["tangent"])
     if on_point is not None:
         on_point(0, state)
     stop = RESULTS.max_points
@@ -516,10 +538,7 @@ def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Setti
             stop = RESULTS.nonfinite
             break
         if bool(state.accepted):
-            rows.append((np.asarray(state.y), float(state.lam), int(state.steps),
-                         bool(state.fold), float(state.fold_lam),
-                         np.concatenate([np.asarray(state.ty), [float(state.tlam)]]),
-                         float(state.h)))
+            rows.append(host_row(state))
             asked = on_point(len(rows) - 1, state) if on_point is not None else None
             if (float(state.lam) - lam_end) * direction >= 0:
                 stop = RESULTS.reached_end
@@ -527,18 +546,17 @@ def continue_branch(param: AbstractParameter, y0, lam0, lam_end, settings: Setti
             if asked is not None:
                 stop = asked
                 break
-            z = np.append(rows[-1][0], rows[-1][1])
-            if trace.revisits(z, rows[-1][5]):
+            z = np.append(rows[-1]["y"], rows[-1]["lam"])
+            if trace.revisits(z, rows[-1]["tangent"]):
                 stop = RESULTS.closed_loop
                 break
-            trace.add(z, rows[-1][5])
+            trace.add(z, rows[-1]["tangent"])
         elif float(state.h) < settings.min_step:
             stop = RESULTS.step_too_small
             break
-    y, lam, steps, fold, fold_lam, tan, h = (np.array(v) for v in zip(*rows))
-    omegas = np.array([float(param.omega(l)) for l in lam])
-    return Branch(y=np.stack(y), lam=lam, omega=omegas, steps=steps, fold=fold,
-                  fold_lam=fold_lam, tangent=np.stack(tan), h=h, result=stop)
+    arrays = {k: np.stack([r[k] for r in rows]) for k in rows[0]}
+    omegas = np.array([float(param.omega(lam)) for lam in arrays["lam"]])
+    return Branch(**arrays, omega=omegas, result=stop, n_points=len(rows))
 
 
 class Trace:

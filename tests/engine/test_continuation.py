@@ -27,8 +27,8 @@ def branch():
     param = C.FrequencyParameter(problem=problem, omega_ref=jnp.asarray(1.0))
     settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02)
     y0 = _newton.solve_hb(problem, 0.5).y
-    ys, lams, folds, fold_lams, n, code = jax.jit(
-        lambda y: C.continue_compiled(param, y, 0.5, 1.5, settings, 400))(y0)
+    b = jax.jit(lambda y: C.continue_compiled(param, y, 0.5, 1.5, settings, 400))(y0)
+    ys, lams, folds, fold_lams, n, code = b.y, b.lam, b.fold, b.fold_lam, b.n_points, b.result
     n = int(n)
     X = np.asarray(ys[:n]).reshape(n, 2 * K + 1, 1) * np.asarray(problem.x_scale)
     x = np.asarray(jax.vmap(lambda c: _aft.synthesis(c, T))(jnp.asarray(X)))[..., 0]
@@ -79,6 +79,21 @@ def test_python_driver_matches_and_compiles_once_for_any_steps(branch):
     w = b1.omega[-1]
     X1 = b1.y[-1].reshape(2 * K + 1, 1)[1:3, 0] * float(problem.x_scale[0])
     assert np.hypot(*X1) == pytest.approx(abs(0.03 / (1 - w**2 + 0.1j * w)), rel=1e-9)
+
+
+def test_compiled_and_python_continuations_give_the_same_branch(branch):
+    param, settings, y0 = branch["param"], branch["settings"], branch["y0"]
+    padded = C.continue_compiled(param, y0, 0.5, 0.6, settings, 50)
+    assert padded.lam.shape == (50,) and bool(jnp.isnan(padded.lam[-1]))
+    compiled = padded.trimmed()
+    python = C.continue_branch(param, y0, 0.5, 0.6, settings, max_points=50)
+    assert compiled.n_points == python.n_points == len(python.lam) > 2
+    assert bool(compiled.result == python.result == RESULTS.reached_end)
+    for field in ("lam", "omega", "y", "tangent", "h", "fold_lam"):
+        np.testing.assert_allclose(getattr(compiled, field), getattr(python, field),
+                                   rtol=1e-9, atol=1e-12, err_msg=field)
+    np.testing.assert_array_equal(compiled.steps, python.steps)
+    np.testing.assert_array_equal(compiled.fold, python.fold)
 
 
 def test_stops_with_reason_and_keeps_points(branch):

@@ -31,8 +31,8 @@ def oscillator_folds(n_time):
     param = C.FrequencyParameter(problem=problem, omega_ref=jnp.asarray(1.0))
     settings = C.Settings(step=0.05, max_step=0.3, max_dlambda=0.02)
     y0 = gj.solve_hb(problem, 0.5).y
-    ys, lams, folds, fold_lams, n, code = jax.jit(
-        lambda y: C.continue_compiled(param, y, 0.5, 1.5, settings, 400))(y0)
+    b = jax.jit(lambda y: C.continue_compiled(param, y, 0.5, 1.5, settings, 400))(y0)
+    ys, lams, folds, fold_lams, n, code = b.y, b.lam, b.fold, b.fold_lam, b.n_points, b.result
     n = int(n)
     assert bool(code == RESULTS.reached_end)
     f = C.distinct_folds(np.asarray(fold_lams[:n])[np.asarray(folds[:n])])
