@@ -57,15 +57,14 @@ def hb_sweep(K: int, T: int, repeats: int, own_jit: bool = True):
         out = jax.block_until_ready(run(0.5))
         times.append(time.perf_counter() - t0)
     branch = out.trimmed()
-    ys, lams, folds, fold_lams, n = (branch.y, branch.lam, branch.fold, branch.fold_lam,
-                                     branch.n_points)
-    X = ys[:n].reshape(n, 2 * K + 1, 1) * np.asarray(problem.x_scale)
+    n = branch.n_points
+    X = branch.y.reshape(n, 2 * K + 1, 1) * np.asarray(problem.x_scale)
     x = np.asarray(jax.vmap(lambda c: gj.aft_synthesis(c, T))(jnp.asarray(X)))[..., 0]
     amplitude = (x.max(1) - x.min(1)) / 2
     return {
         "points": n,
         "stop": gj.result_word(branch.result),
-        "folds": gj.distinct_folds(fold_lams[:n][folds[:n]]),
+        "folds": gj.distinct_folds(branch.fold_lam[branch.fold]),
         "max_amp": float(amplitude.max()),
         "compile_s": compile_s,
         "ms_per_point": 1e3 * statistics.median(times) / n,
