@@ -28,6 +28,8 @@ class Parser(argparse.ArgumentParser):
 
 
 def usage_message(prog: str, message: str) -> str:
+    """argparse's refusal ``message`` as one line in the form of every other refusal:
+    the flag, its value (or ``(missing)``) and the rule, and where ``--help`` helps."""
     message = " ".join(message.split())
     hint = f" (see {prog} --help)"
     m = re.fullmatch(r"argument (\S+?)(?:/\S+)?: invalid choice: (.*?) \(choose from (.*)\)",
@@ -53,13 +55,11 @@ def usage_message(prog: str, message: str) -> str:
     return f"command line: {prog}: {message}{hint}"
 
 
-# shared flags: declared once, added to each command that takes them
-
-REFERENCE_STAGE_HELP = "reference stage id (default: first turning stage)"
+# the flags several commands share, declared once
 
 
 def reference_stage_flag(c: argparse.ArgumentParser) -> None:
-    c.add_argument("--stage", help=REFERENCE_STAGE_HELP)
+    c.add_argument("--stage", help="reference stage id (default: first turning stage)")
 
 
 def linear_flag(c: argparse.ArgumentParser) -> None:
