@@ -28,9 +28,11 @@ class TomlReader:
             raise self.fail(field, value, "must be a table")
 
     def keys(self, raw: dict, allowed: set[str], field: str) -> None:
+        """Refuse a key of ``raw`` not in ``allowed`` (``field``: the table, ``""`` for the
+        file's top level)."""
         for key in raw:
             if key not in allowed:
-                raise self.fail(f"{field} key", key,
+                raise self.fail(f"{field} key" if field else "key", key,
                                 f"unknown key; known keys are {', '.join(sorted(allowed))}")
 
     def sub(self, raw: dict, key: str, field: str, keys: set[str]) -> dict:
@@ -66,6 +68,12 @@ class TomlReader:
             raise self.fail(field, value, "must be an integer")
         if low is not None and value < low:
             raise self.fail(field, value, rule or f"must be >= {low}")
+        return value
+
+    def boolean(self, raw, key, field, *, default=_MISSING) -> bool:
+        value = self._get(raw, key, field, default)
+        if not isinstance(value, bool):
+            raise self.fail(field, value, "must be true or false")
         return value
 
     def string(self, raw, key, field, *, default=_MISSING) -> str:

@@ -38,6 +38,7 @@ import pathlib
 import tomllib
 
 from ..._errors import fail
+from ..._gear.toml_reader import TomlReader, finite_number
 
 DESIGNS = ("grid", "list", "lhs")
 """How the variations combine into candidates."""
@@ -128,10 +129,8 @@ def loads_study(text: str, source: str = "<study>", base=".") -> StudySpec:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise fail(source, "file", "<TOML>", f"is not valid TOML ({e})") from None
-    for key in raw:
-        if key not in _TOP_KEYS:
-            raise fail(source, "key", key,
-                       f"unknown key; known keys are {', '.join(sorted(_TOP_KEYS))}")
+    r = TomlReader(source)
+    r.keys(raw, _TOP_KEYS, "")
     train_path, train_text = _train(raw, source, pathlib.Path(base))
     gear = raw.get("gear")
     if gear is not None and not isinstance(gear, str):
@@ -142,12 +141,12 @@ def loads_study(text: str, source: str = "<study>", base=".") -> StudySpec:
     for key in ("samples", "seed"):
         if design != "lhs" and key in raw:
             raise fail(source, key, raw[key], f"is for design = \"lhs\" (this is {design!r})")
-    samples = _integer(raw, "samples", source, None, low=1) if design == "lhs" else 0
-    seed = _integer(raw, "seed", source, 0, low=0)
+    samples = _integer(r, raw, "samples", "samples", low=1) if design == "lhs" else 0
+    seed = _integer(r, raw, "seed", "seed", low=0, default=0)
     vary = raw.get("vary")
     if not isinstance(vary, list) or not vary or not all(isinstance(v, dict) for v in vary):
         raise fail(source, "vary", vary, "at least one [[vary]] table is required")
-    variations = tuple(_variation(v, i, source, design) for i, v in enumerate(vary))
+    variations = tuple(_variation(v, i, r, design) for i, v in enumerate(vary))
     paths = [v.path for v in variations]
     for i, p in enumerate(paths):
         if p in paths[:i]:
@@ -163,7 +162,7 @@ def loads_study(text: str, source: str = "<study>", base=".") -> StudySpec:
         raise fail(source, "vary", n, f"candidates; at most {MAX_CANDIDATES} per study")
     return StudySpec(source=source, train_path=train_path, train_text=train_text, gear=gear,
                      design=design, samples=samples, seed=seed, variations=variations,
-                     analysis=_analysis(raw.get("analysis", {}), source), text=text)
+                     analysis=_analysis(raw.get("analysis", {}), r), text=text)
 
 
 def candidate_count(design: str, variations, samples: int) -> int:
@@ -191,155 +190,123 @@ def _train(raw: dict, source: str, base: pathlib.Path) -> tuple[str | None, str]
         raise fail(source, "train", value, f"cannot be read as {str(path)!r} ({reason})") from None
 
 
-def _integer(raw: dict, key: str, source: str, default, *, low: int, field=None) -> int:
-    field = field or key
-    value = raw.get(key, default)
-    if value is None:
-        raise fail(source, field, None, "is required")
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise fail(source, field, value, f"must be an integer >= {low}")
-    return value
+def _integer(r: TomlReader, raw: dict, key: str, field: str, *, low: int, **default) -> int:
+    return r.integer(raw, key, field, low=low, rule=f"must be an integer >= {low}", **default)
 
 
-def _number(value) -> bool:
-    return (isinstance(value, int | float) and not isinstance(value, bool)
-            and math.isfinite(value))
-
-
-def _variation(raw: dict, i: int, source: str, design: str) -> Variation:
+def _variation(raw: dict, i: int, r: TomlReader, design: str) -> Variation:
     f = f"vary[{i}]"
-    for key in raw:
-        if key not in _VARY_KEYS:
-            raise fail(source, f"{f} key", key,
-                       f"unknown key; known keys are {', '.join(sorted(_VARY_KEYS))}")
+    r.keys(raw, _VARY_KEYS, f)
     path = raw.get("path")
     if not isinstance(path, str) or not path:
-        raise fail(source, f"{f}.path", path, "must be a train-file path such as "
-                   "\"1.mesh_stiffness.ring\" or \"2.planet_angles_deg\"")
+        raise r.fail(f"{f}.path", path, "must be a train-file path such as "
+                     "\"1.mesh_stiffness.ring\" or \"2.planet_angles_deg\"")
     if "values" in raw:
         if any(k in raw for k in ("from", "to", "points", "step")):
-            raise fail(source, f"{f}.values", raw["values"],
-                       "give either values or a range (from, to, points or step), not both")
+            raise r.fail(f"{f}.values", raw["values"],
+                         "give either values or a range (from, to, points or step), not both")
         if design == "lhs":
-            raise fail(source, f"{f}.values", raw["values"],
-                       "design = \"lhs\" samples ranges: give from and to")
+            raise r.fail(f"{f}.values", raw["values"],
+                         "design = \"lhs\" samples ranges: give from and to")
         values = raw["values"]
         ok = isinstance(values, list) and values and all(
-            _number(v) or (isinstance(v, list) and v and all(_number(x) for x in v))
+            finite_number(v) or (isinstance(v, list) and v and all(finite_number(x) for x in v))
             for v in values)
         if not ok:
-            raise fail(source, f"{f}.values", values,
-                       "must be a non-empty list of numbers, or of lists of numbers")
+            raise r.fail(f"{f}.values", values,
+                         "must be a non-empty list of numbers, or of lists of numbers")
         return Variation(path=path, values=tuple(tuple(v) if isinstance(v, list) else v
                                                  for v in values))
     low, high = raw.get("from"), raw.get("to")
     for key, value in (("from", low), ("to", high)):
-        if not _number(value):
-            raise fail(source, f"{f}.{key}", value,
-                       "must be a finite number (or give values instead of a range)")
+        if not finite_number(value):
+            raise r.fail(f"{f}.{key}", value,
+                         "must be a finite number (or give values instead of a range)")
     integer = isinstance(low, int) and isinstance(high, int)
     if design == "lhs":
         if high <= low:
-            raise fail(source, f"{f}.to", high, f"must exceed from = {low}")
+            raise r.fail(f"{f}.to", high, f"must exceed from = {low}")
         if "points" in raw or "step" in raw:
-            raise fail(source, f"{f}.points", raw.get("points", raw.get("step")),
-                       "design = \"lhs\" draws `samples` values of each range: no points or step")
+            raise r.fail(f"{f}.points", raw.get("points", raw.get("step")),
+                         "design = \"lhs\" draws `samples` values of each range: no points or step")
         return Variation(path=path, low=float(low), high=float(high), integer=integer)
-    return Variation(path=path, values=_range_values(raw, f, source, low, high, integer),
+    return Variation(path=path, values=_range_values(raw, f, r, low, high, integer),
                      integer=integer)
 
 
-def _range_values(raw: dict, f: str, source: str, low, high, integer: bool) -> tuple:
+def _range_values(raw: dict, f: str, r: TomlReader, low, high, integer: bool) -> tuple:
     if ("points" in raw) == ("step" in raw):
-        raise fail(source, f"{f}.points", raw.get("points"),
-                   "a range needs exactly one of points and step")
+        raise r.fail(f"{f}.points", raw.get("points"),
+                     "a range needs exactly one of points and step")
     if "points" in raw:
-        n = _integer(raw, "points", source, None, low=1, field=f"{f}.points")
+        n = _integer(r, raw, "points", f"{f}.points", low=1)
         if n == 1:
             return (low,)
         values = [low + (high - low) * k / (n - 1) for k in range(n)]
     else:
         step = raw["step"]
-        if not _number(step) or step == 0 or (high - low) * step < 0:
-            raise fail(source, f"{f}.step", step,
-                       f"must be a non-zero number that leads from {low} to {high}")
+        if not finite_number(step) or step == 0 or (high - low) * step < 0:
+            raise r.fail(f"{f}.step", step,
+                         f"must be a non-zero number that leads from {low} to {high}")
         n = int(math.floor((high - low) / step * (1 + 1e-12))) + 1
         values = [low + k * step for k in range(n)]
     if integer:
         rounded = [int(round(v)) for v in values]
         if len(set(rounded)) < len(rounded) or any(abs(r - v) > 1e-9
                                                    for r, v in zip(rounded, values)):
-            raise fail(source, f"{f}.points", len(values),
-                       f"the range {low}..{high} of integers does not hold these even values")
+            raise r.fail(f"{f}.points", len(values),
+                         f"the range {low}..{high} of integers does not hold these even values")
         return tuple(rounded)
     return tuple(float(v) for v in values)
 
 
-def _analysis(raw, source: str) -> Analysis:
-    if not isinstance(raw, dict):
-        raise fail(source, "analysis", raw, "must be a table")
-    for key in raw:
-        if key not in _ANALYSIS_KEYS:
-            raise fail(source, "analysis key", key,
-                       f"unknown key; known keys are {', '.join(sorted(_ANALYSIS_KEYS))}")
-    modes = raw.get("modes", True)
-    if not isinstance(modes, bool):
-        raise fail(source, "analysis.modes", modes, "must be true or false")
-    sweeps = {kind: _sweep(raw.get(kind), kind, source) for kind in ("linear", "backlash")}
-    verify = _verify(raw.get("verify"), source)
+def _analysis(raw, r: TomlReader) -> Analysis:
+    r.table(raw, "analysis")
+    r.keys(raw, _ANALYSIS_KEYS, "analysis")
+    modes = r.boolean(raw, "modes", "analysis.modes", default=True)
+    sweeps = {kind: _sweep(raw.get(kind), kind, r) for kind in ("linear", "backlash")}
+    verify = _verify(raw.get("verify"), r)
     if not modes and verify is None and all(v is None for v in sweeps.values()):
-        raise fail(source, "analysis", raw, "asks for nothing: set modes = true, or a "
-                   "linear or backlash sweep, or verify")
+        raise r.fail("analysis", raw, "asks for nothing: set modes = true, or a "
+                     "linear or backlash sweep, or verify")
     return Analysis(modes=modes, verify=verify, **sweeps)
 
 
-def _verify(raw, source: str) -> dict | None:
+def _verify(raw, r: TomlReader) -> dict | None:
     if raw is None:
         return None
     f = "analysis.verify"
-    if not isinstance(raw, dict):
-        raise fail(source, f, raw, "must be a table")
-    keys = {"at_hz", "linear", "harmonics"}
-    for key in raw:
-        if key not in keys:
-            raise fail(source, f"{f} key", key,
-                       f"unknown key; known keys are {', '.join(sorted(keys))}")
+    r.table(raw, f)
+    r.keys(raw, {"at_hz", "linear", "harmonics"}, f)
     at = raw.get("at_hz")
-    if not isinstance(at, list) or not at or not all(_number(x) and x > 0 for x in at):
-        raise fail(source, f"{f}.at_hz", at,
-                   "must be a non-empty list of positive frequencies (Hz)")
-    linear = raw.get("linear", False)
-    if not isinstance(linear, bool):
-        raise fail(source, f"{f}.linear", linear, "must be true or false")
-    out = {"at_hz": tuple(float(x) for x in at), "linear": linear}
+    if not isinstance(at, list) or not at or not all(finite_number(x) and x > 0 for x in at):
+        raise r.fail(f"{f}.at_hz", at,
+                     "must be a non-empty list of positive frequencies (Hz)")
+    out = {"at_hz": tuple(float(x) for x in at),
+           "linear": r.boolean(raw, "linear", f"{f}.linear", default=False)}
     if "harmonics" in raw:
-        out["harmonics"] = _integer(raw, "harmonics", source, None, low=1,
-                                    field=f"{f}.harmonics")
+        out["harmonics"] = _integer(r, raw, "harmonics", f"{f}.harmonics", low=1)
     return out
 
 
-def _sweep(raw, kind: str, source: str) -> dict | None:
+def _sweep(raw, kind: str, r: TomlReader) -> dict | None:
     if raw is None:
         return None
     f = f"analysis.{kind}"
-    if not isinstance(raw, dict):
-        raise fail(source, f, raw, "must be a table")
-    for key in raw:
-        if key not in _SWEEP_KEYS[kind]:
-            raise fail(source, f"{f} key", key,
-                       f"unknown key; known keys are {', '.join(sorted(_SWEEP_KEYS[kind]))}")
+    r.table(raw, f)
+    r.keys(raw, _SWEEP_KEYS[kind], f)
     band = raw.get("band_hz")
-    if (not isinstance(band, list) or len(band) != 2 or not all(_number(b) for b in band)
+    if (not isinstance(band, list) or len(band) != 2 or not all(finite_number(b) for b in band)
             or min(band) <= 0 or band[0] == band[1]):
-        raise fail(source, f"{f}.band_hz", band,
-                   "must be two different positive frequencies [from, to] (Hz)")
+        raise r.fail(f"{f}.band_hz", band,
+                     "must be two different positive frequencies [from, to] (Hz)")
     out = {"band_hz": (float(band[0]), float(band[1]))}
     for key, low in (("points", 2), ("max_points", 2), ("harmonics", 1)):
         if key in raw:
-            out[key] = _integer(raw, key, source, None, low=low, field=f"{f}.{key}")
+            out[key] = _integer(r, raw, key, f"{f}.{key}", low=low)
     if "max_step_hz" in raw:
-        if not _number(raw["max_step_hz"]) or raw["max_step_hz"] <= 0:
-            raise fail(source, f"{f}.max_step_hz", raw["max_step_hz"],
-                       "must be a positive number (Hz)")
+        if not finite_number(raw["max_step_hz"]) or raw["max_step_hz"] <= 0:
+            raise r.fail(f"{f}.max_step_hz", raw["max_step_hz"],
+                         "must be a positive number (Hz)")
         out["max_step_hz"] = float(raw["max_step_hz"])
     return out
