@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("always", TrainWarning)
             warnings.showwarning = warning_printer(notes, warnings.showwarning)
-            if not getattr(args, "needs_train", True):  # e.g. plot: a results file, no train
+            if not args.needs_train:  # study and plot read other files
                 return args.run(args, None, notes)
             from .._gear.toml_io import load_train
 

@@ -431,10 +431,9 @@ class Branch(eqx.Module):
     def trimmed(self) -> Branch:
         """The points found, as numpy arrays (padding dropped); ``result`` as it is."""
         n = int(self.n_points)
-        return dataclasses.replace(
-            self, **{f: np.asarray(getattr(self, f))[:n] for f in (
-                "y", "lam", "omega", "steps", "fold", "fold_lam", "tangent", "h")},
-            n_points=n)
+        rows = {f.name: np.asarray(getattr(self, f.name))[:n] for f in dataclasses.fields(self)
+                if f.name not in ("result", "n_points")}
+        return dataclasses.replace(self, **rows, n_points=n)
 
 
 def distinct_folds(fold_lams, tol: float = 1e-3) -> np.ndarray:
